@@ -1,0 +1,1 @@
+//! Constant-curvature kinematic model of the 3-FbRR (work in progress).

@@ -1,0 +1,1 @@
+//! Qualisys real-time protocol bridge (not started yet; see the issues).

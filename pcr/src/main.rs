@@ -1,0 +1,60 @@
+//! `pcr`: the offline tools of the 3-FbRR control stack.
+//!
+//! Each subcommand group lives in its own module with an `Args` type and a `run` function.
+
+use clap::{Parser, Subcommand};
+
+mod kin;
+mod plan;
+mod plant;
+mod profile;
+
+/// Offline tools for the 3-FbRR planar parallel continuum robot.
+#[derive(Parser)]
+#[command(name = "pcr", version, about, propagate_version = true)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Inverse kinematics: poses (x_mm, y_mm, phi_deg) to curvatures and motor steps.
+    Ik(kin::IkArgs),
+    /// Forward kinematics: curvatures (or motor steps) to platform poses.
+    Fk(kin::FkArgs),
+    /// Constant-orientation workspace, base-radius sweep and accuracy map.
+    Workspace(kin::WorkspaceArgs),
+    /// Solve jerk-limited profiling cases from a JSON file.
+    Profile(profile::Args),
+    /// Plan a checked 20 ms setpoint sequence along a task-space path.
+    Plan(plan::Args),
+    /// Static poses and time-stepped runs of the simulated plant.
+    Plant(plant::Args),
+}
+
+fn main() -> std::process::ExitCode {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_env("PCR_LOG")
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Ik(a) => kin::run_ik(a),
+        Command::Fk(a) => kin::run_fk(a),
+        Command::Workspace(a) => kin::run_workspace(a),
+        Command::Profile(a) => profile::run(a),
+        Command::Plan(a) => plan::run(a),
+        Command::Plant(a) => plant::run(a),
+    };
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}

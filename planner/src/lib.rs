@@ -1,0 +1,1 @@
+//! Jerk-limited trajectory profiler, paths and interpolator (work in progress).

@@ -1,0 +1,1 @@
+//! Supervisor of the process chain (not started yet; see the issues).
