@@ -1,0 +1,1 @@
+//! Recording format reader/writer (work in progress).
