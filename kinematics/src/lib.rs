@@ -1,1 +1,22 @@
-//! Constant-curvature kinematic model of the 3-FbRR (work in progress).
+//! Constant-curvature kinematic model of the 3-FbRR planar parallel continuum robot.
+//!
+//! Conventions are those of `../shared/spec/geometry.md`: millimetres, radians inside the code,
+//! curvatures in 1/mm, motor steps as signed numbers. The model has two layers:
+//! - the robot-dependent model ([`tendon`]): tendon displacement to curvature, and
+//! - the robot-independent model: leg forward kinematics ([`leg`]), loop closure, IK ([`ik`]),
+//!   FK ([`fk`]), Jacobians and singularities ([`jacobian`]) and the workspace ([`workspace`]).
+
+pub mod fk;
+pub mod ik;
+pub mod jacobian;
+pub mod leg;
+pub mod model;
+pub mod pose;
+pub mod tendon;
+
+pub use fk::FkError;
+pub use ik::{IkError, IkSolution, LegRoot, LegRoots};
+pub use jacobian::Conditioning;
+pub use model::{ModelError, Robot};
+pub use pose::Pose;
+pub use tendon::{TendonMap, TendonMapError};

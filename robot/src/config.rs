@@ -59,7 +59,10 @@ impl WorkingMode {
 
     /// Parses "---", "-+-", ... into three modes.
     pub fn parse_triple(s: &str) -> Option<[WorkingMode; 3]> {
-        let c: Vec<char> = s.chars().filter(|c| !c.is_whitespace() && *c != ',').collect();
+        let c: Vec<char> = s
+            .chars()
+            .filter(|c| !c.is_whitespace() && *c != ',')
+            .collect();
         if c.len() != 3 {
             return None;
         }
@@ -344,7 +347,11 @@ impl RobotConfig {
             ];
             for (name, v) in positive {
                 if !(v.is_finite() && v > 0.0) {
-                    return Err(bad(k(name), v.to_string(), "must be a finite length/rate > 0"));
+                    return Err(bad(
+                        k(name),
+                        v.to_string(),
+                        "must be a finite length/rate > 0",
+                    ));
                 }
             }
             for (name, v) in [
@@ -358,7 +365,11 @@ impl RobotConfig {
                 }
             }
             if leg.l_ce_mm < 0.0 {
-                return Err(bad(k("l_ce_mm"), leg.l_ce_mm.to_string(), "must be >= 0 mm"));
+                return Err(bad(
+                    k("l_ce_mm"),
+                    leg.l_ce_mm.to_string(),
+                    "must be >= 0 mm",
+                ));
             }
             for (name, v) in [
                 ("beta_deg", leg.beta_deg),
@@ -377,7 +388,11 @@ impl RobotConfig {
                 ));
             }
             if leg.actuation.steps_per_rev == 0 {
-                return Err(bad(k("actuation.steps_per_rev"), "0".into(), "must be >= 1"));
+                return Err(bad(
+                    k("actuation.steps_per_rev"),
+                    "0".into(),
+                    "must be >= 1",
+                ));
             }
             let tm = &leg.tendon_map;
             let want = tm.model.n_coeffs();
@@ -423,13 +438,19 @@ mod tests {
     #[test]
     fn errors_name_the_key() {
         let text = NOMINAL.replacen("l_st_mm = 164.0", "l_st_mm = -1.0", 1);
-        let e = RobotConfig::from_toml_str(&text, "r.toml").unwrap_err().to_string();
+        let e = RobotConfig::from_toml_str(&text, "r.toml")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("legs[1].l_st_mm"), "{e}");
         let text = NOMINAL.replacen("l_c_mm", "l_cc_mm", 1);
-        let e = RobotConfig::from_toml_str(&text, "r.toml").unwrap_err().to_string();
+        let e = RobotConfig::from_toml_str(&text, "r.toml")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("l_cc_mm"), "{e}");
         let text = NOMINAL.replacen("working_mode = \"---\"", "working_mode = \"-x-\"", 1);
-        let e = RobotConfig::from_toml_str(&text, "r.toml").unwrap_err().to_string();
+        let e = RobotConfig::from_toml_str(&text, "r.toml")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("working_mode"), "{e}");
         let mut c = RobotConfig::nominal();
         c.legs.pop();

@@ -1,0 +1,337 @@
+//! The robot-dependent model: tendon displacement to curvature (the regression families of the
+//! paper's Table I), its derivative and its inverse, and the motor-step conversion.
+//!
+//! Odd extension: every non-constant basis function b(dl) is evaluated as
+//! `sgn(dl) * b(|dl|)`, so that a map fitted to positive displacements bends the segment the
+//! other way by the same amount for negative ones; the constant k0 stays an offset. The
+//! polynomial terms therefore read `dl`, `dl|dl|`, `dl^3`.
+
+use pcr_robot::{Actuation, LegConfig, TendonMapKind, TendonMapSpec};
+
+/// Why a curvature could not be mapped back to a tendon displacement.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum TendonMapError {
+    /// The requested curvature is outside the range the map reaches in the search interval.
+    #[error("curvature {kappa} 1/mm is outside the tendon map's range [{lo}, {hi}] 1/mm")]
+    OutOfRange {
+        /// Requested curvature.
+        kappa: f64,
+        /// Smallest reachable curvature.
+        lo: f64,
+        /// Largest reachable curvature.
+        hi: f64,
+    },
+    /// The map is not monotonic where the inverse was needed.
+    #[error("tendon map `{0}` is not monotonic on the search interval; it cannot be inverted")]
+    NotMonotonic(TendonMapKind),
+}
+
+/// Largest |dl| (mm) the inverse searches: far beyond any tendon travel of the prototype.
+pub const DL_SEARCH_MM: f64 = 60.0;
+
+/// An evaluated tendon map kappa = f(dl) of one leg.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TendonMap {
+    kind: TendonMapKind,
+    /// Coefficients with k0 first (k0 = 0 for families without an offset).
+    k: [f64; 7],
+    n: usize,
+}
+
+#[inline]
+fn odd(dl: f64, v: f64) -> f64 {
+    if dl < 0.0 {
+        -v
+    } else {
+        v
+    }
+}
+
+impl TendonMap {
+    /// Builds the map of a leg from its configuration (the linear map with no coefficients is
+    /// the nominal `1 / (a l_C)`).
+    pub fn from_leg(leg: &LegConfig) -> TendonMap {
+        let spec = &leg.tendon_map;
+        if spec.model == TendonMapKind::Linear && spec.coeffs.is_empty() {
+            return TendonMap::new(
+                TendonMapKind::Linear,
+                &[1.0 / (leg.actuation.tendon_offset_mm * leg.l_c_mm)],
+            );
+        }
+        TendonMap::from_spec(spec)
+    }
+
+    /// Builds a map from a validated specification.
+    pub fn from_spec(spec: &TendonMapSpec) -> TendonMap {
+        TendonMap::new(spec.model, &spec.coeffs)
+    }
+
+    /// Builds a map from its family and coefficients as written in the configuration
+    /// (k0 first for families with an offset). Missing coefficients are zero.
+    pub fn new(kind: TendonMapKind, coeffs: &[f64]) -> TendonMap {
+        let mut k = [0.0; 7];
+        let off = usize::from(!kind.has_offset());
+        for (j, c) in coeffs.iter().take(kind.n_coeffs()).enumerate() {
+            k[j + off] = *c;
+        }
+        TendonMap {
+            kind,
+            k,
+            n: kind.n_coeffs() + off,
+        }
+    }
+
+    /// The family.
+    pub fn kind(&self) -> TendonMapKind {
+        self.kind
+    }
+
+    /// Coefficients k0, k1, ... as in the configuration file (k0 omitted for families without it).
+    pub fn coeffs(&self) -> Vec<f64> {
+        let off = usize::from(!self.kind.has_offset());
+        self.k[off..self.n].to_vec()
+    }
+
+    /// Basis functions of the family at `dl` (mm), including the constant 1 first; returns the
+    /// number written. Used by the regression (linear least squares in the coefficients).
+    pub fn basis(kind: TendonMapKind, dl: f64, out: &mut [f64; 7]) -> usize {
+        let a = dl.abs();
+        out[0] = 1.0;
+        let n = kind.n_coeffs() + usize::from(!kind.has_offset());
+        match kind {
+            TendonMapKind::Linear | TendonMapKind::Affine => out[1] = dl,
+            TendonMapKind::Poly2 | TendonMapKind::Poly3 => {
+                out[1] = dl;
+                out[2] = dl * a;
+                out[3] = dl * dl * dl;
+            }
+            TendonMapKind::Root2
+            | TendonMapKind::Root3
+            | TendonMapKind::Root4
+            | TendonMapKind::Root5
+            | TendonMapKind::Root6 => {
+                out[1] = dl;
+                for (j, o) in out.iter_mut().enumerate().take(n).skip(2) {
+                    *o = odd(dl, a.powf(1.0 / j as f64));
+                }
+            }
+            TendonMapKind::Log | TendonMapKind::LogAffine => out[1] = odd(dl, a.ln_1p()),
+            TendonMapKind::LinLog => {
+                out[1] = dl;
+                out[2] = odd(dl, a.ln_1p());
+            }
+            TendonMapKind::Log2 => {
+                let l = a.ln_1p();
+                out[1] = odd(dl, l);
+                out[2] = odd(dl, l * l);
+            }
+        }
+        n
+    }
+
+    /// Curvature (1/mm) for a signed tendon displacement `dl` (mm).
+    pub fn kappa(&self, dl: f64) -> f64 {
+        self.kappa_and_slope(dl).0
+    }
+
+    /// Curvature (1/mm) and its derivative d kappa / d dl (1/mm^2) at `dl` (mm).
+    ///
+    /// The root families have an infinite slope at dl = 0; there the slope at |dl| = 1e-9 mm
+    /// is returned.
+    pub fn kappa_and_slope(&self, dl: f64) -> (f64, f64) {
+        let k = &self.k;
+        let a = dl.abs();
+        match self.kind {
+            TendonMapKind::Linear | TendonMapKind::Affine => (k[0] + k[1] * dl, k[1]),
+            TendonMapKind::Poly2 | TendonMapKind::Poly3 => (
+                k[0] + k[1] * dl + k[2] * dl * a + k[3] * dl * dl * dl,
+                k[1] + 2.0 * k[2] * a + 3.0 * k[3] * dl * dl,
+            ),
+            TendonMapKind::Root2
+            | TendonMapKind::Root3
+            | TendonMapKind::Root4
+            | TendonMapKind::Root5
+            | TendonMapKind::Root6 => {
+                let a_eff = a.max(1e-9);
+                let mut v = k[0] + k[1] * dl;
+                let mut s = k[1];
+                for (j, kj) in k.iter().enumerate().take(self.n).skip(2) {
+                    let e = 1.0 / j as f64;
+                    let p = a.powf(e);
+                    v += odd(dl, kj * p);
+                    s += kj * e * a_eff.powf(e - 1.0);
+                }
+                (v, s)
+            }
+            TendonMapKind::Log | TendonMapKind::LogAffine => {
+                (k[0] + odd(dl, k[1] * a.ln_1p()), k[1] / (1.0 + a))
+            }
+            TendonMapKind::LinLog => (
+                k[0] + k[1] * dl + odd(dl, k[2] * a.ln_1p()),
+                k[1] + k[2] / (1.0 + a),
+            ),
+            TendonMapKind::Log2 => {
+                let l = a.ln_1p();
+                (
+                    k[0] + odd(dl, k[1] * l + k[2] * l * l),
+                    (k[1] + 2.0 * k[2] * l) / (1.0 + a),
+                )
+            }
+        }
+    }
+
+    /// Inverse: the tendon displacement (mm) that gives curvature `kappa` (1/mm), searched in
+    /// |dl| <= [`DL_SEARCH_MM`]. The map must be monotonic there (every calibrated map of a real
+    /// segment is).
+    pub fn dl_for_kappa(&self, kappa: f64) -> Result<f64, TendonMapError> {
+        if self.kind == TendonMapKind::Linear || self.kind == TendonMapKind::Affine {
+            if self.k[1] == 0.0 {
+                return Err(TendonMapError::NotMonotonic(self.kind));
+            }
+            let dl = (kappa - self.k[0]) / self.k[1];
+            if dl.abs() > DL_SEARCH_MM {
+                return Err(self.out_of_range(kappa));
+            }
+            return Ok(dl);
+        }
+        let (mut lo, mut hi) = (-DL_SEARCH_MM, DL_SEARCH_MM);
+        let (flo, fhi) = (self.kappa(lo) - kappa, self.kappa(hi) - kappa);
+        if flo * fhi > 0.0 {
+            return Err(self.out_of_range(kappa));
+        }
+        let increasing = fhi > flo;
+        // Safeguarded Newton: keep a bracket, take Newton steps when they stay inside it.
+        let mut x = 0.0f64;
+        for _ in 0..200 {
+            let (v, s) = self.kappa_and_slope(x);
+            let f = v - kappa;
+            if (f > 0.0) == increasing {
+                hi = x;
+            } else {
+                lo = x;
+            }
+            if f == 0.0 || hi - lo < 1e-13 {
+                return Ok(x);
+            }
+            let newton = x - f / s;
+            x = if s != 0.0 && newton > lo && newton < hi && s.is_finite() {
+                newton
+            } else {
+                0.5 * (lo + hi)
+            };
+            if (x - lo).abs() < 1e-15 || (hi - x).abs() < 1e-15 {
+                x = 0.5 * (lo + hi);
+            }
+        }
+        // A bracket that does not shrink means the map turns back inside it.
+        if (self.kappa(x) - kappa).abs() < 1e-12 {
+            Ok(x)
+        } else {
+            Err(TendonMapError::NotMonotonic(self.kind))
+        }
+    }
+
+    fn out_of_range(&self, kappa: f64) -> TendonMapError {
+        let a = self.kappa(-DL_SEARCH_MM);
+        let b = self.kappa(DL_SEARCH_MM);
+        TendonMapError::OutOfRange {
+            kappa,
+            lo: a.min(b),
+            hi: a.max(b),
+        }
+    }
+}
+
+/// Motor steps to tendon displacement (mm): dl = q 2 pi r_act / n_spr.
+#[inline]
+pub fn steps_to_dl(act: &Actuation, q: f64) -> f64 {
+    q * act.mm_per_step()
+}
+
+/// Tendon displacement (mm) to motor steps (not rounded).
+#[inline]
+pub fn dl_to_steps(act: &Actuation, dl: f64) -> f64 {
+    dl / act.mm_per_step()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample_map(kind: TendonMapKind) -> TendonMap {
+        // Coefficients of a plausible, monotonic map: slope ~1/(7*125) 1/mm^2.
+        let c = match kind.n_coeffs() {
+            1 => vec![1.0 / 875.0],
+            2 => vec![1e-5, 1.0 / 875.0],
+            3 => vec![1e-5, 1.0 / 900.0, 2e-5],
+            4 => vec![1e-5, 1.0 / 900.0, 2e-6, 1e-7],
+            n => {
+                let mut v = vec![1e-5, 1.0 / 900.0];
+                v.extend((2..n).map(|j| 1e-5 / j as f64));
+                v
+            }
+        };
+        TendonMap::new(kind, &c)
+    }
+
+    #[test]
+    fn nominal_linear_matches_geometry_md() {
+        let leg = LegConfig::nominal(0);
+        let m = TendonMap::from_leg(&leg);
+        // 176 steps -> dl = 176 * 2 pi 5 / 2048 mm -> kappa = dl / 875
+        let dl = steps_to_dl(&leg.actuation, 176.0);
+        assert!((m.kappa(dl) - dl / 875.0).abs() < 1e-18);
+        assert!((dl_to_steps(&leg.actuation, dl) - 176.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn every_family_inverts_and_has_the_right_slope() {
+        for kind in TendonMapKind::ALL {
+            let m = sample_map(kind);
+            for i in -40..=40 {
+                let dl = i as f64 * 0.37 + 0.013;
+                let (k, s) = m.kappa_and_slope(dl);
+                // odd extension of the non-constant part
+                let (kn, _) = m.kappa_and_slope(-dl);
+                let k0 = if kind.has_offset() {
+                    m.coeffs()[0]
+                } else {
+                    0.0
+                };
+                assert!(((k - k0) + (kn - k0)).abs() < 1e-15, "{kind} not odd");
+                let h = 1e-6;
+                let fd = (m.kappa(dl + h) - m.kappa(dl - h)) / (2.0 * h);
+                assert!(
+                    (fd - s).abs() < 1e-7 * s.abs().max(1e-3),
+                    "{kind} slope {s} vs {fd}"
+                );
+                let back = m.dl_for_kappa(k).unwrap();
+                assert!((back - dl).abs() < 1e-9, "{kind}: {back} vs {dl}");
+            }
+        }
+    }
+
+    #[test]
+    fn out_of_range_is_an_error() {
+        let m = sample_map(TendonMapKind::Log);
+        assert!(matches!(
+            m.dl_for_kappa(10.0),
+            Err(TendonMapError::OutOfRange { .. })
+        ));
+        let m = TendonMap::new(TendonMapKind::Linear, &[0.0]);
+        assert!(m.dl_for_kappa(0.1).is_err());
+    }
+
+    #[test]
+    fn basis_reproduces_evaluation() {
+        for kind in TendonMapKind::ALL {
+            let m = sample_map(kind);
+            let mut b = [0.0; 7];
+            for dl in [-3.1, -0.2, 0.0, 0.5, 7.7] {
+                let n = TendonMap::basis(kind, dl, &mut b);
+                let v: f64 = (0..n).map(|j| b[j] * m.k[j]).sum();
+                assert!((v - m.kappa(dl)).abs() < 1e-15, "{kind}");
+            }
+        }
+    }
+}
