@@ -109,6 +109,12 @@ impl Robot {
     /// Every root of leg `i`'s loop closure for `pose` in the scanned bending range, whether in
     /// the working mode or not, with its joint angles and limit checks.
     pub fn leg_roots(&self, i: usize, pose: &Pose) -> LegRoots {
+        self.roots_filtered(i, pose, None)
+    }
+
+    /// The roots of leg `i`; with `branch = Some(s)`, brackets whose gamma has clearly the
+    /// other sign than `s` at both ends are skipped (they cannot be the working mode's root).
+    fn roots_filtered(&self, i: usize, pose: &Pose, branch: Option<f64>) -> LegRoots {
         let leg = &self.legs[i];
         let tab = &self.tables[i];
         let pb = self.joint_p(i, pose);
@@ -116,6 +122,8 @@ impl Robot {
         let c0 = p[0] * p[0] + p[1] * p[1] - leg.l_st * leg.l_st;
         let (px2, py2) = (2.0 * p[0], 2.0 * p[1]);
         let h = |k: usize| c0 + tab.nn[k] - px2 * tab.mx[k] - py2 * tab.my[k];
+        // dh/dtheta = -2 (p - m) . dm
+        let dh = |k: usize| -px2 * tab.dmx[k] - py2 * tab.dmy[k] + 2.0 * tab.mdm[k];
         // Exact h and dh/dtheta.
         let eval = |theta: f64| {
             let t = leg.local_tip(theta);
@@ -139,13 +147,39 @@ impl Robot {
             if h_prev == 0.0 {
                 push(a);
             } else if h_prev * h_k < 0.0 {
-                push(refine(&eval, a, b, h_prev));
+                // sign of gamma ~ sign of t x (p - m) at the bracket ends
+                let skip = branch.is_some_and(|s| {
+                    let gs = |k: usize| {
+                        let (st, ct) = (tab.st[k], tab.ct[k]);
+                        st * (p[1] - tab.my[k]) - ct * (p[0] - tab.mx[k])
+                    };
+                    gs(k - 1) * s < 0.0 && gs(k) * s < 0.0
+                });
+                if !skip {
+                    let start = a + (b - a) * h_prev / (h_prev - h_k);
+                    push(refine(&eval, a, b, h_prev, start));
+                }
             } else if h_k != 0.0 {
                 // Same sign at both ends: a pair of roots hides only where h turns back.
-                let (_, da) = eval(a);
-                let (_, db) = eval(b);
+                let (da, db) = (dh(k - 1), dh(k));
                 let towards_zero = if h_prev > 0.0 { da < 0.0 } else { da > 0.0 };
-                if da * db < 0.0 && towards_zero {
+                // Cheap screen: the cubic Hermite interpolant of the cell; only where it comes
+                // close to zero is the exact extremum searched.
+                let close = || {
+                    let dt = b - a;
+                    let mut m = f64::INFINITY;
+                    for s in 1..8 {
+                        let t = s as f64 / 8.0;
+                        let (t2, t3) = (t * t, t * t * t);
+                        let v = (2.0 * t3 - 3.0 * t2 + 1.0) * h_prev
+                            + (t3 - 2.0 * t2 + t) * dt * da
+                            + (-2.0 * t3 + 3.0 * t2) * h_k
+                            + (t3 - t2) * dt * db;
+                        m = m.min(v * h_prev.signum());
+                    }
+                    m < 0.1 * (h_prev.abs() + h_k.abs())
+                };
+                if da * db < 0.0 && towards_zero && close() {
                     // Locate the extremum by bisection on dh, then test its sign.
                     let (mut lo, mut hi) = (a, b);
                     for _ in 0..60 {
@@ -160,8 +194,8 @@ impl Robot {
                     let ext = 0.5 * (lo + hi);
                     let (he, _) = eval(ext);
                     if he * h_prev <= 0.0 {
-                        push(refine(&eval, a, ext, h_prev));
-                        push(refine(&eval, ext, b, he));
+                        push(refine(&eval, a, ext, h_prev, 0.5 * (a + ext)));
+                        push(refine(&eval, ext, b, he, 0.5 * (ext + b)));
                     }
                 }
             }
@@ -171,9 +205,13 @@ impl Robot {
             push(tab.theta0 + tab.dtheta * (TABLE_N - 1) as f64);
         }
         let lim = &self.limits;
+        let pe = g::rot(pose.phi, leg.p_e);
         for r in out.roots[..out.n].iter_mut() {
             r.kappa = r.theta / leg.l_c;
-            let (gamma, zeta) = self.joint_angles(i, pose, r.kappa);
+            let tip = leg.local_tip(r.theta);
+            let d = g::sub(p, tip.m);
+            let gamma = g::signed_angle(tip.t, d);
+            let zeta = g::signed_angle(pe, leg.to_base(g::scale(-1.0, d)));
             r.gamma = gamma;
             r.zeta = zeta;
             r.bending_ok = r.theta.abs() <= lim.bending_max;
@@ -186,7 +224,7 @@ impl Robot {
     /// IK of one leg in the working mode's branch.
     pub fn leg_ik(&self, i: usize, pose: &Pose) -> Result<LegRoot, IkError> {
         let sign = self.mode[i].sign();
-        let roots = self.leg_roots(i, pose);
+        let roots = self.roots_filtered(i, pose, Some(sign));
         let mut best: Option<LegRoot> = None;
         for r in roots.as_slice().iter().filter(|r| r.gamma * sign > 0.0) {
             let better = match &best {
@@ -240,9 +278,9 @@ impl Robot {
 }
 
 /// Safeguarded Newton in [a, b], where h(a) has sign of `ha` and h(b) the opposite.
-fn refine(eval: &impl Fn(f64) -> (f64, f64), a: f64, b: f64, ha: f64) -> f64 {
+fn refine(eval: &impl Fn(f64) -> (f64, f64), a: f64, b: f64, ha: f64, start: f64) -> f64 {
     let (mut lo, mut hi) = (a, b); // h(lo) has the sign of ha
-    let mut x = 0.5 * (a + b);
+    let mut x = start;
     for _ in 0..100 {
         let (h, dh) = eval(x);
         if h == 0.0 {

@@ -13,6 +13,7 @@ pub mod leg;
 pub mod model;
 pub mod pose;
 pub mod tendon;
+pub mod workspace;
 
 pub use fk::FkError;
 pub use ik::{IkError, IkSolution, LegRoot, LegRoots};

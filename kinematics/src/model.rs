@@ -16,6 +16,14 @@ pub(crate) struct LegTable {
     pub my: [f64; TABLE_N],
     /// |m|^2
     pub nn: [f64; TABLE_N],
+    /// d m / d theta
+    pub dmx: [f64; TABLE_N],
+    pub dmy: [f64; TABLE_N],
+    /// m . dm/dtheta
+    pub mdm: [f64; TABLE_N],
+    /// tip tangent (sin theta, cos theta)
+    pub st: [f64; TABLE_N],
+    pub ct: [f64; TABLE_N],
 }
 
 impl LegTable {
@@ -28,12 +36,23 @@ impl LegTable {
             mx: [0.0; TABLE_N],
             my: [0.0; TABLE_N],
             nn: [0.0; TABLE_N],
+            dmx: [0.0; TABLE_N],
+            dmy: [0.0; TABLE_N],
+            mdm: [0.0; TABLE_N],
+            st: [0.0; TABLE_N],
+            ct: [0.0; TABLE_N],
         };
         for k in 0..TABLE_N {
-            let m = leg.local_tip(theta0 + dtheta * k as f64).m;
+            let tip = leg.local_tip(theta0 + dtheta * k as f64);
+            let (m, dm) = (tip.m, tip.dm);
             t.mx[k] = m[0];
             t.my[k] = m[1];
             t.nn[k] = m[0] * m[0] + m[1] * m[1];
+            t.dmx[k] = dm[0];
+            t.dmy[k] = dm[1];
+            t.mdm[k] = m[0] * dm[0] + m[1] * dm[1];
+            t.st[k] = tip.t[0];
+            t.ct[k] = tip.t[1];
         }
         t
     }

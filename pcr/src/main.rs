@@ -4,6 +4,8 @@
 
 use clap::{Parser, Subcommand};
 
+mod csvio;
+mod figures_kin;
 mod kin;
 mod plan;
 mod plant;

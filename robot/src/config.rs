@@ -416,6 +416,14 @@ impl RobotConfig {
     }
 }
 
+impl RobotConfig {
+    /// The same configuration with another name.
+    pub fn with_name(mut self, name: &str) -> RobotConfig {
+        self.name = name.to_string();
+        self
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -467,13 +475,5 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("legs[3].tendon_map.coeffs"), "{e}");
-    }
-}
-
-impl RobotConfig {
-    /// The same configuration with another name.
-    pub fn with_name(mut self, name: &str) -> RobotConfig {
-        self.name = name.to_string();
-        self
     }
 }
