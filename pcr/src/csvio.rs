@@ -76,3 +76,45 @@ pub fn next_record(
         None => anyhow!("{file}: {e}"),
     })
 }
+
+/// Output columns = the input's columns followed by the added ones; an added column that the
+/// input already has replaces the input's cell instead of appearing twice.
+pub struct Layout {
+    /// The output header.
+    pub header: Vec<String>,
+    /// For each added column, its index in the output row.
+    pub slots: Vec<usize>,
+}
+
+impl Layout {
+    /// Lays out the input header and the added column names.
+    pub fn new(input: &csv::StringRecord, added: &[String]) -> Layout {
+        let mut header: Vec<String> = input.iter().map(str::to_string).collect();
+        let slots = added
+            .iter()
+            .map(|a| match header.iter().position(|h| h == a) {
+                Some(i) => i,
+                None => {
+                    header.push(a.clone());
+                    header.len() - 1
+                }
+            })
+            .collect();
+        Layout { header, slots }
+    }
+
+    /// Fills `row` with the input record and then the added values (one per added column).
+    pub fn fill(
+        &self,
+        row: &mut Vec<String>,
+        rec: &csv::StringRecord,
+        values: impl IntoIterator<Item = String>,
+    ) {
+        row.clear();
+        row.extend(rec.iter().map(str::to_string));
+        row.resize(self.header.len(), String::new());
+        for (slot, v) in self.slots.iter().zip(values) {
+            row[*slot] = v;
+        }
+    }
+}

@@ -51,35 +51,31 @@ pub fn run_ik(a: IkArgs) -> Result<()> {
     let cy = column(&headers, "y_mm", &a.input)?;
     let cp = column(&headers, "phi_deg", &a.input)?;
     let mut w = csvio::writer(a.output.as_deref())?;
-    let mut out_h: Vec<String> = headers.iter().map(str::to_string).collect();
-    for i in 1..=3 {
-        out_h.push(format!("kappa{i}_per_mm"));
+    let mut added: Vec<String> = Vec::new();
+    for name in [
+        "kappa{i}_per_mm",
+        "dl{i}_mm",
+        "q{i}",
+        "gamma{i}_deg",
+        "zeta{i}_deg",
+    ] {
+        added.extend((1..=3).map(|i| name.replace("{i}", &i.to_string())));
     }
-    for i in 1..=3 {
-        out_h.push(format!("dl{i}_mm"));
-    }
-    for i in 1..=3 {
-        out_h.push(format!("q{i}"));
-    }
-    for i in 1..=3 {
-        out_h.push(format!("gamma{i}_deg"));
-    }
-    for i in 1..=3 {
-        out_h.push(format!("zeta{i}_deg"));
-    }
-    out_h.push("status".into());
-    w.write_record(&out_h)?;
+    added.push("status".into());
+    let layout = csvio::Layout::new(&headers, &added);
+    let out_h = &layout.header;
+    w.write_record(out_h)?;
     let pb = spinner("ik");
     let mut rec = csv::StringRecord::new();
     let mut row: Vec<String> = Vec::with_capacity(out_h.len());
+    let mut vals: Vec<String> = Vec::with_capacity(16);
     while next_record(&mut rdr, &mut rec, &a.input)? {
         let pose = Pose::from_mm_deg(
             number(&rec, cx, "x_mm", &a.input)?,
             number(&rec, cy, "y_mm", &a.input)?,
             number(&rec, cp, "phi_deg", &a.input)?,
         );
-        row.clear();
-        row.extend(rec.iter().map(str::to_string));
+        vals.clear();
         match robot.ik(&pose) {
             Ok(s) => {
                 let mut dl = [0.0; 3];
@@ -96,21 +92,22 @@ pub fn run_ik(a: IkArgs) -> Result<()> {
                         Err(_) => status = "bending_limit",
                     }
                 }
-                row.extend(s.kappa.iter().map(|k| fmt(*k)));
-                row.extend(dl.iter().map(|d| fmt(*d)));
-                row.extend(
+                vals.extend(s.kappa.iter().map(|k| fmt(*k)));
+                vals.extend(dl.iter().map(|d| fmt(*d)));
+                vals.extend(
                     (0..3)
                         .map(|i| format!("{}", (dl[i] / robot.legs[i].mm_per_step).round() as i64)),
                 );
-                row.extend(s.gamma.iter().map(|g| fmt(g.to_degrees())));
-                row.extend(s.zeta.iter().map(|z| fmt(z.to_degrees())));
-                row.push(status.into());
+                vals.extend(s.gamma.iter().map(|g| fmt(g.to_degrees())));
+                vals.extend(s.zeta.iter().map(|z| fmt(z.to_degrees())));
+                vals.push(status.into());
             }
             Err(e) => {
-                row.extend(std::iter::repeat_n(String::new(), 15));
-                row.push(e.status().into());
+                vals.extend(std::iter::repeat_n(String::new(), 15));
+                vals.push(e.status().into());
             }
         }
+        layout.fill(&mut row, &rec, vals.drain(..));
         w.write_record(&row)?;
         pb.inc(1);
     }
@@ -166,9 +163,12 @@ pub fn run_fk(a: FkArgs) -> Result<()> {
         })
         .collect();
     let mut w = csvio::writer(a.output.as_deref())?;
-    let mut out_h: Vec<String> = headers.iter().map(str::to_string).collect();
-    out_h.extend(["x_mm", "y_mm", "phi_deg", "status"].map(String::from));
-    w.write_record(&out_h)?;
+    let layout = csvio::Layout::new(
+        &headers,
+        &["x_mm", "y_mm", "phi_deg", "status"].map(String::from),
+    );
+    w.write_record(&layout.header)?;
+    let mut row: Vec<String> = Vec::with_capacity(layout.header.len());
     let pb = spinner("fk");
     let mut rec = csv::StringRecord::new();
     while next_record(&mut rdr, &mut rec, &a.input)? {
@@ -181,8 +181,7 @@ pub fn run_fk(a: FkArgs) -> Result<()> {
         } else {
             v
         };
-        let mut row: Vec<String> = rec.iter().map(str::to_string).collect();
-        match robot.fk(&kappa) {
+        let vals: [String; 4] = match robot.fk(&kappa) {
             Ok(p) => {
                 // The loops close; report a limit that is violated there, or a singularity.
                 let status = match robot.ik(&p) {
@@ -195,17 +194,16 @@ pub fn run_fk(a: FkArgs) -> Result<()> {
                     }
                     Ok(_) => "ok",
                 };
-                row.extend([fmt(p.x), fmt(p.y), fmt(p.phi_deg()), status.into()]);
+                [fmt(p.x), fmt(p.y), fmt(p.phi_deg()), status.into()]
             }
-            Err(e) => {
-                row.extend([
-                    String::new(),
-                    String::new(),
-                    String::new(),
-                    e.status().into(),
-                ]);
-            }
-        }
+            Err(e) => [
+                String::new(),
+                String::new(),
+                String::new(),
+                e.status().into(),
+            ],
+        };
+        layout.fill(&mut row, &rec, vals);
         w.write_record(&row)?;
         pb.inc(1);
     }
