@@ -117,13 +117,20 @@ impl Robot {
     fn roots_filtered(&self, i: usize, pose: &Pose, branch: Option<f64>) -> LegRoots {
         let leg = &self.legs[i];
         let tab = &self.tables[i];
-        let pb = self.joint_p(i, pose);
+        let pe = g::rot(pose.phi, leg.p_e);
+        let pb = g::add([pose.x, pose.y], pe);
         let p = leg.to_local(g::sub(pb, leg.b));
         let c0 = p[0] * p[0] + p[1] * p[1] - leg.l_st * leg.l_st;
         let (px2, py2) = (2.0 * p[0], 2.0 * p[1]);
-        let h = |k: usize| c0 + tab.nn[k] - px2 * tab.mx[k] - py2 * tab.my[k];
-        // dh/dtheta = -2 (p - m) . dm
-        let dh = |k: usize| -px2 * tab.dmx[k] - py2 * tab.dmy[k] + 2.0 * tab.mdm[k];
+        // h and dh/dtheta = -2 (p - m) . dm on the whole table (straight-line, vectorisable).
+        let mut hv = [0.0; TABLE_N];
+        let mut dhv = [0.0; TABLE_N];
+        for k in 0..TABLE_N {
+            hv[k] = c0 + tab.nn[k] - px2 * tab.mx[k] - py2 * tab.my[k];
+            dhv[k] = 2.0 * tab.mdm[k] - px2 * tab.dmx[k] - py2 * tab.dmy[k];
+        }
+        let h = |k: usize| hv[k];
+        let dh = |k: usize| dhv[k];
         // Exact h and dh/dtheta.
         let eval = |theta: f64| {
             let t = leg.local_tip(theta);
@@ -140,6 +147,14 @@ impl Robot {
         let mut h_prev = h(0);
         for k in 1..TABLE_N {
             let h_k = h(k);
+            // Most cells have no root and no turning point towards zero: skip them first.
+            if h_prev * h_k > 0.0 {
+                let (da, db) = (dh(k - 1), dh(k));
+                if da * db >= 0.0 || (h_prev > 0.0) == (da > 0.0) {
+                    h_prev = h_k;
+                    continue;
+                }
+            }
             let (a, b) = (
                 tab.theta0 + tab.dtheta * (k - 1) as f64,
                 tab.theta0 + tab.dtheta * k as f64,
@@ -205,7 +220,6 @@ impl Robot {
             push(tab.theta0 + tab.dtheta * (TABLE_N - 1) as f64);
         }
         let lim = &self.limits;
-        let pe = g::rot(pose.phi, leg.p_e);
         for r in out.roots[..out.n].iter_mut() {
             r.kappa = r.theta / leg.l_c;
             let tip = leg.local_tip(r.theta);
@@ -302,7 +316,9 @@ fn refine(eval: &impl Fn(f64) -> (f64, f64), a: f64, b: f64, ha: f64, start: f64
         } else {
             0.5 * (lo + hi)
         };
-        if (next - x).abs() <= 1e-15 * (1.0 + x.abs()) {
+        // Newton converges quadratically: after a step below 1e-10 rad the error is at
+        // round-off level.
+        if (next - x).abs() <= 1e-10 {
             return next;
         }
         x = next;

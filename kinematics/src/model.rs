@@ -5,7 +5,7 @@ use crate::pose::Pose;
 use pcr_robot::{geometry as g, RobotConfig, Vec2, WorkingMode};
 
 /// Number of grid points of the per-leg bending-angle table used to bracket IK roots.
-pub(crate) const TABLE_N: usize = 97;
+pub(crate) const TABLE_N: usize = 49;
 
 /// Tabulated local tip positions of a leg over the scanned bending range.
 #[derive(Debug, Clone)]
@@ -114,9 +114,9 @@ impl Robot {
             bending_max: l.bending_max_deg.to_radians(),
             singularity_threshold: l.singularity_threshold,
         };
-        // Scan beyond the bending limit so that a root just outside it is reported as a bending
-        // limit, not as unreachable.
-        let scan = (limits.bending_max * 1.25).clamp(std::f64::consts::PI, std::f64::consts::TAU);
+        // Scan 30 deg beyond the bending limit so that a root just outside it is reported as a
+        // bending limit, not as unreachable.
+        let scan = (limits.bending_max + 30f64.to_radians()).min(std::f64::consts::TAU);
         let tables = std::array::from_fn(|i| LegTable::new(&legs[i], scan));
         let r_char = legs.iter().map(|l| g::norm(l.p_e)).sum::<f64>() / 3.0;
         let mut robot = Robot {

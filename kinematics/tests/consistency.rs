@@ -224,3 +224,50 @@ fn singularity_measure_vanishes_where_the_link_is_tangent() {
         c.a
     );
 }
+
+#[test]
+fn table_scan_finds_every_root_a_fine_scan_finds() {
+    let r = Robot::nominal();
+    let mut rng = ChaCha8Rng::seed_from_u64(7);
+    for _ in 0..400 {
+        let p = Pose::from_mm_deg(
+            rng.random_range(-150.0..150.0),
+            rng.random_range(-150.0..150.0),
+            rng.random_range(-40.0..40.0),
+        );
+        for i in 0..3 {
+            let leg = &r.legs[i];
+            let pb = r.joint_p(i, &p);
+            let h = |theta: f64| {
+                let m = leg.joint_m(theta / leg.l_c);
+                (pb[0] - m[0]).powi(2) + (pb[1] - m[1]).powi(2) - leg.l_st * leg.l_st
+            };
+            // brute force over the bending range with 0.01 deg steps
+            let lim = r.limits.bending_max;
+            let n = 36_000;
+            let mut brute = Vec::new();
+            let mut prev = h(-lim);
+            for k in 1..=n {
+                let th = -lim + 2.0 * lim * k as f64 / n as f64;
+                let v = h(th);
+                if prev * v <= 0.0 && prev != 0.0 {
+                    brute.push(th);
+                }
+                prev = v;
+            }
+            let found: Vec<f64> = r
+                .leg_roots(i, &p)
+                .as_slice()
+                .iter()
+                .map(|x| x.theta)
+                .filter(|t| t.abs() <= lim)
+                .collect();
+            for b in &brute {
+                assert!(
+                    found.iter().any(|f| (f - b).abs() < 1e-3),
+                    "pose {p:?} leg {i}: root at {b} missed (found {found:?})"
+                );
+            }
+        }
+    }
+}
