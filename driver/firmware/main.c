@@ -451,9 +451,20 @@ static void on_setpoint(uint8_t seq, const uint8_t *b)
 			status_flags |= FLAG_ENABLED;
 			coils_energise();
 		}
-		for (uint8_t m = 0; m < N_MOTORS; m++)
+		uint8_t changed = 0;
+		for (uint8_t m = 0; m < N_MOTORS; m++) {
+			if (motors[m].target != tgt[m])
+				changed = 1;
 			motors[m].target = tgt[m];
-		plan_segment();
+		}
+		/*
+		 * A new target starts a new segment from where the motors are (the rest of the
+		 * current one is folded into it). An unchanged target lets the running segment
+		 * finish: otherwise a host whose 20 ms comes slightly earlier than ours would defer
+		 * the segment's last step forever.
+		 */
+		if (changed || !seg_active)
+			plan_segment();
 		since_sp_ms = 0;
 		wd_armed = 1;
 		sei();

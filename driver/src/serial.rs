@@ -157,8 +157,6 @@ impl SerialDriver {
     fn handshake(&mut self) -> Result<HelloReply, DriverError> {
         let deadline = Instant::now() + self.cfg.handshake_timeout;
         loop {
-            // A lone delimiter first: ends any partial frame left in the firmware's decoder.
-            self.send_raw(&[0])?;
             match self.request(Message::Hello {
                 protocol: PROTOCOL_VERSION,
             }) {
@@ -268,9 +266,14 @@ impl SerialDriver {
         }
     }
 
+    /// Every frame goes out as `0x00 ‖ frame ‖ 0x00`: the leading delimiter ends whatever
+    /// partial frame (line noise, an interrupted write) the firmware may be holding.
     fn send(&mut self, msg: &Message) -> Result<u8, DriverError> {
         let seq = self.next_seq();
-        self.send_raw(&encode_frame(seq, msg))?;
+        let mut bytes = Vec::with_capacity(crate::protocol::MAX_FRAME + 1);
+        bytes.push(crate::protocol::DELIMITER);
+        bytes.extend(encode_frame(seq, msg));
+        self.send_raw(&bytes)?;
         self.counters.frames_sent += 1;
         Ok(seq)
     }
@@ -487,7 +490,11 @@ impl SerialDriver {
         let r = self.wait_reply(seq)?;
         match r {
             Message::Error { code, req_type } => self.count_fw_error(code, req_type),
-            Message::State(s) => self.absorb(&s),
+            Message::State(s) => {
+                // Accepted: continue the sequence from there.
+                self.seq = seq;
+                self.absorb(&s);
+            }
             _ => {}
         }
         Ok(r)

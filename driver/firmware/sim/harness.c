@@ -109,7 +109,7 @@ static void *stdin_watch(void *arg)
 		if (n == 0 || (n < 0 && errno != EINTR))
 			break;
 	}
-	printf("T %llu\n", (unsigned long long)avr->cycle);
+	printf("T %llu pc=0x%x state=%d\n", (unsigned long long)avr->cycle, (unsigned)avr->pc, avr->state);
 	fflush(stdout);
 	_exit(0);
 	return NULL;
