@@ -61,7 +61,7 @@ struct Rig {
 /// delayed by a busy machine does not trip it.
 fn relaxed() -> FwConfig {
     FwConfig {
-        watchdog_ms: 2000,
+        watchdog_ms: 5000,
         ..FwConfig::default()
     }
 }
@@ -72,7 +72,9 @@ fn rig(name: &str, fw: FwConfig) -> Rig {
     let link = link_path(name);
     let sim = SimFirmware::spawn(&b, &link).unwrap_or_else(|e| panic!("{e}"));
     let mut cfg = SerialConfig::new(sim.port_path());
-    cfg.reply_timeout = Duration::from_millis(500);
+    // Generous: on a starved machine the emulator can stall for a second; a reply that never
+    // comes still fails the test.
+    cfg.reply_timeout = Duration::from_secs(3);
     cfg.firmware_config = Some(fw);
     let drv = SerialDriver::open(cfg).expect("open the emulated firmware");
     Rig {
@@ -539,7 +541,7 @@ fn vanished_port_gives_clear_error_and_reconnects() {
     let link = PathBuf::from(r.sim.port_path());
     r.sim = SimFirmware::spawn(&build(), &link).unwrap();
     let h = r.drv.reconnect().unwrap();
-    assert_eq!(h.config.watchdog_ms, 2000, "configuration re-applied");
+    assert_eq!(h.config.watchdog_ms, 5000, "configuration re-applied");
     let st = r.drv.status().unwrap();
     assert_eq!(st.steps, [0; 3], "a rebooted firmware starts from zero");
     r.drv.zero(0b111, [9, 9, 9]).unwrap();
@@ -582,4 +584,42 @@ fn safety_wrappers_in_front_of_the_serial_backend() {
         );
     }
     assert!(log.illegal.is_empty());
+}
+
+/// With `idle_off_ms` set, the coils are released once the motors have been idle that long and
+/// re-energised on the same phase before the next move; ENABLE(false) releases them at once.
+#[test]
+fn coils_released_when_idle_if_configured() {
+    let fw = FwConfig {
+        idle_off_ms: 100,
+        watchdog_ms: 0,
+        ..FwConfig::default()
+    };
+    let mut r = rig("idle", fw);
+    let mut t = 0.0;
+    settle(&mut r.drv, &mut t, [5, -3, 2]);
+    let released = |l: &pcr_driver::sim::SimLog| {
+        (0..3).all(|m| {
+            l.coils
+                .iter()
+                .rev()
+                .find(|c| c.0 == m)
+                .is_some_and(|c| !c.1)
+        })
+    };
+    assert!(r.sim.wait_for(Duration::from_secs(10), released));
+    let st = r.drv.status().unwrap();
+    assert_eq!(st.flags & flags::COILS_ON, 0);
+    assert!(st.flags & flags::ENABLED != 0);
+    // Moving again energises the coils on the phase they were released at (else the harness
+    // would report an illegal pattern), and the steps still count exactly.
+    settle(&mut r.drv, &mut t, [9, -9, 0]);
+    assert_eq!(r.sim.positions(), [9, -9, 0]);
+    let st = r.drv.set_enable(false).unwrap();
+    assert_eq!(st.flags & (flags::COILS_ON | flags::ENABLED), 0);
+    assert!(r.sim.wait_for(Duration::from_secs(5), released));
+    // A setpoint re-enables.
+    settle(&mut r.drv, &mut t, [10, -10, 1]);
+    assert_eq!(r.sim.positions(), [10, -10, 1]);
+    assert_no_illegal(&r.sim);
 }
