@@ -761,6 +761,23 @@ mod tests {
         }
     }
 
+    /// The example frame of PROTOCOL.md.
+    #[test]
+    fn golden_setpoint_frame() {
+        let f = encode_frame(
+            1,
+            &Message::Setpoint {
+                enable: true,
+                steps: [12, -6, 3],
+            },
+        );
+        let want = [
+            0x05, 0x02, 0x01, 0x01, 0x0c, 0x01, 0x01, 0x06, 0xfa, 0xff, 0xff, 0xff, 0x03, 0x01,
+            0x01, 0x03, 0x28, 0xc7, 0x00,
+        ];
+        assert_eq!(f, want);
+    }
+
     #[test]
     fn cycle_frame_sizes() {
         let sp = Message::Setpoint {

@@ -108,6 +108,8 @@ pub struct SimLog {
     pub illegal: Vec<String>,
     /// Whether the harness has exited.
     pub exited: bool,
+    /// At a clean exit ([`SimFirmware::stop`]): (AVR cycles run, cycles not spent asleep).
+    pub cpu: Option<(u64, u64)>,
 }
 
 impl SimLog {
@@ -196,6 +198,11 @@ impl SimFirmware {
                         }
                     }
                     ["X", ..] => g.illegal.push(line.clone()),
+                    ["T", total, busy] => {
+                        if let (Ok(t), Ok(b)) = (total.parse(), busy.parse()) {
+                            g.cpu = Some((t, b));
+                        }
+                    }
                     _ => {}
                 }
                 cv.notify_all();
@@ -255,6 +262,15 @@ impl SimFirmware {
             }
             g = cv.wait_timeout(g, deadline - now).unwrap().0;
         }
+    }
+
+    /// Stops the emulator cleanly (closes its stdin) and returns the final log, with the
+    /// firmware's CPU load in [`SimLog::cpu`].
+    pub fn stop(mut self) -> SimLog {
+        drop(self.child.stdin.take());
+        let _ = self.wait_for(Duration::from_secs(10), |l| l.exited);
+        self.kill();
+        self.log()
     }
 
     /// Kills the emulator (the port vanishes).

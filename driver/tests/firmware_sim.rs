@@ -216,6 +216,12 @@ fn setpoint_stream_steps_match_exactly() {
     assert_eq!(st.counters.crc_errors + st.counters.framing_errors, 0);
     assert_eq!(st.counters.seq_errors + st.counters.range_rejects, 0);
     assert_eq!(r.drv.counters().timeouts, 0);
+    // The 10 kHz step interrupt plus the protocol leave the AVR mostly asleep.
+    let Rig { sim, drv, _guard } = r;
+    drop(drv);
+    let (total, busy) = sim.stop().cpu.expect("harness reports its CPU load");
+    let load = busy as f64 / total as f64;
+    assert!(load < 0.5, "firmware CPU load {:.1} %", load * 100.0);
 }
 
 /// One setpoint from rest: all motors finish together at the end of the 20 ms segment, with

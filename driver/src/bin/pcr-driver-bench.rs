@@ -56,7 +56,7 @@ fn main() {
         }
     }
 
-    let _sim;
+    let mut sim_handle = None;
     let path = match port {
         Some(p) => p,
         None => {
@@ -71,7 +71,7 @@ fn main() {
                 std::process::exit(1)
             });
             let p = sim.port_path();
-            _sim = sim;
+            sim_handle = Some(sim);
             p
         }
     };
@@ -156,4 +156,19 @@ fn main() {
     );
     let c = d.counters();
     println!("host counters: {c:?}");
+    drop(d);
+    if let Some(sim) = sim_handle {
+        let log = sim.stop();
+        if let Some((total, busy)) = log.cpu {
+            println!(
+                "firmware CPU load (emulated ATmega328P, whole run): {:.1} % ({busy} of {total} cycles awake)",
+                busy as f64 / total as f64 * 100.0,
+            );
+        }
+        println!(
+            "steps decoded from the coils: {:?}; illegal patterns: {}",
+            log.step_counts(),
+            log.illegal.len()
+        );
+    }
 }
