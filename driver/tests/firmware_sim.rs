@@ -629,3 +629,58 @@ fn coils_released_when_idle_if_configured() {
     assert_eq!(r.sim.positions(), [10, -10, 1]);
     assert_no_illegal(&r.sim);
 }
+
+/// Commands the firmware must refuse: unsupported protocol version, out-of-bounds
+/// configuration, zeroing or reconfiguring while moving.
+#[test]
+fn firmware_refuses_bad_commands() {
+    let fw = FwConfig {
+        watchdog_ms: 0,
+        ..FwConfig::default()
+    };
+    let mut r = rig("refusals", fw);
+    let rep = r.drv.request(Message::Hello { protocol: 2 }).unwrap();
+    assert_eq!(
+        rep,
+        Message::Error {
+            code: ErrorCode::Version,
+            req_type: 1
+        }
+    );
+    for bad in [
+        FwConfig { max_rate: 0, ..fw },
+        FwConfig {
+            max_rate: 5000,
+            ..fw
+        },
+        FwConfig { cycle_ms: 2, ..fw },
+        FwConfig {
+            pos_min: 10,
+            pos_max: 10,
+            ..fw
+        },
+        FwConfig {
+            watchdog_ms: 5,
+            ..fw
+        },
+    ] {
+        let e = r.drv.configure(bad).unwrap_err();
+        assert!(e.to_string().contains("BadConfig"), "{bad:?}: {e}");
+    }
+    // Busy while moving.
+    let mut t = 0.0;
+    let s = stream(&mut r.drv, &mut t, 1, |_| [500, 0, 0])[0];
+    assert!(s.moving);
+    let e = r.drv.zero(0b001, [0, 0, 0]).unwrap_err();
+    assert!(e.to_string().contains("Busy"), "{e}");
+    let e = r.drv.configure(FwConfig::default()).unwrap_err();
+    assert!(e.to_string().contains("Busy"), "{e}");
+    // Stop (ENABLE false stops and releases), then zeroing works.
+    r.drv.set_enable(false).unwrap();
+    let st = r.drv.zero(0b001, [0, 0, 0]).unwrap();
+    assert_eq!(st.steps, [0, 0, 0]);
+    let st = r.drv.status().unwrap();
+    assert_eq!(st.targets, [0, 0, 0]);
+    assert_eq!(r.drv.counters().fw_other_errors, 1 + 5 + 2);
+    assert_no_illegal(&r.sim);
+}
