@@ -1,6 +1,10 @@
 //! Safety limits as decorators around any [`Driver`] (openrr-arci style): each wrapper is itself
 //! a `Driver`, so they stack, e.g.
-//! `Watchdog::new(RateLimit::new(PositionLimit::new(serial, lo, hi), 600.0), 0.1)`.
+//! `Watchdog::new(PositionLimit::new(RateLimit::new(serial, 600.0), lo, hi), 0.1)`.
+//!
+//! Order matters for [`RateLimit`]: it measures each change from the last command *it* passed
+//! on, so nothing that modifies commands (such as [`PositionLimit`]) may sit between it and the
+//! drive; put it innermost.
 //!
 //! * [`PositionLimit`] clamps each motor's target into `[min, max]` steps.
 //! * [`RateLimit`] clamps each motor's change per cycle to `max_rate * period` steps, measured
@@ -65,6 +69,15 @@ impl<D: Driver> PositionLimit<D> {
 impl<D: Driver> Driver for PositionLimit<D> {
     fn name(&self) -> &str {
         self.inner.name()
+    }
+    fn diagnostics(&self) -> Vec<(String, u64)> {
+        let mut v = self.inner.diagnostics();
+        v.push(("position_limit.commands".into(), self.counters.commands));
+        v.push((
+            "position_limit.interventions".into(),
+            self.counters.interventions,
+        ));
+        v
     }
     fn write(&mut self, time_s: f64, period_s: f64, cmd: &MotorCommand) -> Result<(), DriverError> {
         let mut c = *cmd;
@@ -143,6 +156,15 @@ impl<D: Driver> RateLimit<D> {
 impl<D: Driver> Driver for RateLimit<D> {
     fn name(&self) -> &str {
         self.inner.name()
+    }
+    fn diagnostics(&self) -> Vec<(String, u64)> {
+        let mut v = self.inner.diagnostics();
+        v.push(("rate_limit.commands".into(), self.counters.commands));
+        v.push((
+            "rate_limit.interventions".into(),
+            self.counters.interventions,
+        ));
+        v
     }
     fn write(&mut self, time_s: f64, period_s: f64, cmd: &MotorCommand) -> Result<(), DriverError> {
         let reference = match self.last {
@@ -266,6 +288,12 @@ impl<D: Driver> Watchdog<D> {
 impl<D: Driver> Driver for Watchdog<D> {
     fn name(&self) -> &str {
         self.inner.name()
+    }
+    fn diagnostics(&self) -> Vec<(String, u64)> {
+        let mut v = self.inner.diagnostics();
+        v.push(("watchdog.commands".into(), self.counters.commands));
+        v.push(("watchdog.interventions".into(), self.counters.interventions));
+        v
     }
     fn write(&mut self, time_s: f64, period_s: f64, cmd: &MotorCommand) -> Result<(), DriverError> {
         if self.check(time_s) {
@@ -402,9 +430,22 @@ mod tests {
     }
 
     #[test]
+    fn clamped_then_returning_command_moves_back() {
+        let inner = RateLimit::new(Fake::default(), 600.0);
+        let mut d = PositionLimit::new(inner, [-20; 3], [20; 3]);
+        for k in 0..10 {
+            let t = k as f64 * 0.02;
+            d.write(t, 0.02, &cmd([1000, 0, 0])).unwrap();
+            d.read(t, 0.02).unwrap();
+        }
+        d.write(0.2, 0.02, &cmd([0, 0, 0])).unwrap();
+        assert_eq!(d.inner().inner().writes.last().unwrap().steps, [8, 0, 0]);
+    }
+
+    #[test]
     fn wrappers_stack() {
-        let inner = PositionLimit::new(Fake::default(), [-20; 3], [20; 3]);
-        let mut d = Watchdog::new(RateLimit::new(inner, 600.0), 0.1);
+        let inner = RateLimit::new(Fake::default(), 600.0);
+        let mut d = Watchdog::new(PositionLimit::new(inner, [-20; 3], [20; 3]), 0.1);
         for k in 0..10 {
             let t = k as f64 * 0.02;
             d.write(t, 0.02, &cmd([1000, -1000, 3])).unwrap();
@@ -414,5 +455,11 @@ mod tests {
         assert_eq!(f[0].steps, [12, -12, 3]);
         assert_eq!(f.last().unwrap().steps, [20, -20, 3]);
         assert_eq!(d.name(), "fake");
+        let diag = d.diagnostics();
+        let get = |k: &str| diag.iter().find(|(n, _)| n == k).unwrap().1;
+        assert_eq!(get("position_limit.interventions"), 10);
+        assert_eq!(get("rate_limit.interventions"), 1);
+        assert_eq!(get("watchdog.commands"), 10);
+        assert_eq!(get("watchdog.interventions"), 0);
     }
 }

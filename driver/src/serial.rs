@@ -92,6 +92,7 @@ pub struct SerialDriver {
     pending: Option<u8>,
     last: DriverState,
     last_flags: u8,
+    last_err_count: u8,
     counters: HostCounters,
     hello: Option<HelloReply>,
 }
@@ -123,6 +124,7 @@ impl SerialDriver {
             pending: None,
             last: DriverState::default(),
             last_flags: 0,
+            last_err_count: 0,
             counters: HostCounters::default(),
             hello: None,
         };
@@ -417,6 +419,14 @@ impl SerialDriver {
 
     fn absorb(&mut self, s: &StateReport) {
         self.last_flags = s.flags;
+        if s.err_count != self.last_err_count {
+            tracing::warn!(
+                port = %self.cfg.path,
+                count = s.err_count,
+                "firmware bad-frame count changed"
+            );
+        }
+        self.last_err_count = s.err_count;
         self.last.steps = s.steps;
         self.last.enabled = s.flags & flags::ENABLED != 0;
         self.last.moving = s.flags & flags::MOVING != 0;
@@ -431,10 +441,11 @@ impl SerialDriver {
     pub fn status(&mut self) -> Result<StatusReport, DriverError> {
         match self.request(Message::Status)? {
             Message::StatusReply(s) => {
+                let err_count = self.last_err_count;
                 self.absorb(&StateReport {
                     steps: s.steps,
                     flags: s.flags,
-                    err_count: 0,
+                    err_count,
                 });
                 Ok(s)
             }
@@ -522,6 +533,29 @@ impl Driver for SerialDriver {
         })?;
         self.pending = Some(seq);
         Ok(())
+    }
+
+    fn diagnostics(&self) -> Vec<(String, u64)> {
+        let c = &self.counters;
+        [
+            ("frames_sent", c.frames_sent),
+            ("frames_received", c.frames_received),
+            ("rx_decode_errors", c.rx_decode_errors),
+            ("stale_replies", c.stale_replies),
+            ("timeouts", c.timeouts),
+            ("fw_crc_reports", c.fw_crc_reports),
+            ("fw_seq_rejects", c.fw_seq_rejects),
+            ("fw_range_rejects", c.fw_range_rejects),
+            ("fw_fault_rejects", c.fw_fault_rejects),
+            ("fw_other_errors", c.fw_other_errors),
+            ("limited_acks", c.limited_acks),
+            ("transport_errors", c.transport_errors),
+            ("reconnects", c.reconnects),
+            ("fw_bad_frames_mod256", u64::from(self.last_err_count)),
+        ]
+        .into_iter()
+        .map(|(k, v)| (format!("serial.{k}"), v))
+        .collect()
     }
 
     fn read(&mut self, time_s: f64, _period_s: f64) -> Result<DriverState, DriverError> {

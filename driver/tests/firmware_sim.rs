@@ -563,7 +563,7 @@ fn vanished_port_gives_clear_error_and_reconnects() {
 fn safety_wrappers_in_front_of_the_serial_backend() {
     let r = rig("safety", relaxed());
     let Rig { sim, drv, _guard } = r;
-    let mut d = RateLimit::new(PositionLimit::new(drv, [-50; 3], [50; 3]), 500.0);
+    let mut d = PositionLimit::new(RateLimit::new(drv, 500.0), [-50; 3], [50; 3]);
     let mut t = 0.0;
     let states = stream(&mut d, &mut t, 20, |k| {
         if k % 2 == 0 {
@@ -576,6 +576,11 @@ fn safety_wrappers_in_front_of_the_serial_backend() {
     settle(&mut d, &mut t, [50, -50, 7]);
     assert_eq!(sim.positions(), [50, -50, 7]);
     let st = d.inner_mut().inner_mut().status().unwrap();
+    let diag = d.diagnostics();
+    let get = |k: &str| diag.iter().find(|(n, _)| n == k).map(|x| x.1);
+    assert_eq!(get("position_limit.interventions"), Some(20));
+    assert_eq!(get("serial.timeouts"), Some(0));
+    assert_eq!(get("rate_limit.interventions"), Some(4)); // 0 -> 50 at 10 steps per cycle
     assert_eq!(st.counters.range_rejects, 0);
     let log = sim.log();
     for m in 0..2 {
