@@ -244,6 +244,11 @@ static void uart_init(void)
 	UCSR0B = _BV(RXEN0) | _BV(TXEN0) | _BV(RXCIE0);
 }
 
+static uint8_t tx_free(void)
+{
+	return (uint8_t)((tx_tail - tx_head - 1) & (TX_SIZE - 1));
+}
+
 static void uart_put(uint8_t b)
 {
 	uint8_t next = (uint8_t)(tx_head + 1) & (TX_SIZE - 1);
@@ -625,7 +630,10 @@ static void on_block(void)
 	uint16_t got = (uint16_t)raw[n - 2] | ((uint16_t)raw[n - 1] << 8);
 	if (crc16(raw, (uint8_t)(n - 2)) != got) {
 		c_crc++;
-		send_error(0, ERR_CRC, 0);
+		/* only if it fits without waiting: a burst of garbage must not stall the parser
+		 * (and overflow the RX ring) behind a flood of error replies */
+		if (tx_free() >= 16)
+			send_error(0, ERR_CRC, 0);
 		return;
 	}
 	dispatch(raw, (uint8_t)(n - 2));
