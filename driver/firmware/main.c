@@ -452,6 +452,12 @@ static void on_setpoint(uint8_t seq, const uint8_t *b)
 		set_enabled(0);
 	} else {
 		cli();
+		if (status_flags & FLAG_FAULT) {
+			/* the host watchdog tripped between the check above and here */
+			sei();
+			send_error(seq, ERR_FAULT, MSG_SETPOINT);
+			return;
+		}
 		if (!(status_flags & FLAG_ENABLED)) {
 			status_flags |= FLAG_ENABLED;
 			coils_energise();
