@@ -188,6 +188,12 @@ impl SerialDriver {
                 }
                 Ok(other) => {
                     tracing::warn!(?other, "unexpected handshake reply");
+                    if Instant::now() >= deadline {
+                        return Err(DriverError::Protocol(format!(
+                            "unexpected handshake reply from the firmware: {other:?}"
+                        )));
+                    }
+                    std::thread::sleep(Duration::from_millis(20));
                 }
                 Err(DriverError::Protocol(_)) if Instant::now() < deadline => {}
                 Err(e @ DriverError::Protocol(_)) => {
