@@ -71,7 +71,7 @@ fn main() {
                 std::process::exit(1)
             });
             let p = sim.port_path();
-            sim_handle = Some(sim);
+            sim_handle = Some((sim, dir));
             p
         }
     };
@@ -157,8 +157,9 @@ fn main() {
     let c = d.counters();
     println!("host counters: {c:?}");
     drop(d);
-    if let Some(sim) = sim_handle {
+    if let Some((sim, dir)) = sim_handle {
         let log = sim.stop();
+        let _ = std::fs::remove_dir_all(&dir);
         if let Some((total, busy)) = log.cpu {
             println!(
                 "firmware CPU load (emulated ATmega328P, whole run): {:.1} % ({busy} of {total} cycles awake)",
