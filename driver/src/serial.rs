@@ -351,7 +351,7 @@ impl SerialDriver {
             }
             _ => {
                 self.counters.stale_replies += 1;
-                tracing::debug!(port = %self.cfg.path, seq = f.seq, "stale reply dropped");
+                tracing::warn!(port = %self.cfg.path, seq = f.seq, "stale reply dropped");
             }
         }
     }
