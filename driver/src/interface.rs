@@ -51,4 +51,10 @@ pub trait Driver {
     fn write(&mut self, time_s: f64, period_s: f64, cmd: &MotorCommand) -> Result<(), DriverError>;
     /// Reads the drive's state at the end of the cycle.
     fn read(&mut self, time_s: f64, period_s: f64) -> Result<DriverState, DriverError>;
+    /// Diagnostic counters for monitoring, as `(name, value)` pairs (bad frames, refusals,
+    /// timeouts, safety interventions...). Safety wrappers append theirs to the wrapped
+    /// driver's. The default reports none.
+    fn diagnostics(&self) -> Vec<(String, u64)> {
+        Vec::new()
+    }
 }
