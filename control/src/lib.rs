@@ -1,0 +1,1 @@
+//! Control steps and the in-process runtime (work in progress).

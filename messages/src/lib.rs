@@ -1,0 +1,1 @@
+//! Message types and service names of the process chain (work in progress).

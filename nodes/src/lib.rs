@@ -1,0 +1,1 @@
+//! Shared iceoryx2 process wrapper of the chain (work in progress).
