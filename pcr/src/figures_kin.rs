@@ -183,7 +183,7 @@ pub fn accuracy_svg(path: &str, robot: &Robot, ws: &Workspace, acc: &[Option<f64
     );
     let root = SVGBackend::new(path, (900, 820)).into_drawing_area();
     root.fill(&WHITE).map_err(err)?;
-    let (main, bar) = root.split_horizontally(800);
+    let (main, bar) = root.split_horizontally(770);
     let mut chart = ChartBuilder::on(&main)
         .caption(
             format!(
@@ -230,7 +230,8 @@ pub fn accuracy_svg(path: &str, robot: &Robot, ws: &Workspace, acc: &[Option<f64
     let mut cb = ChartBuilder::on(&bar)
         .margin_top(60)
         .margin_bottom(55)
-        .y_label_area_size(55)
+        .margin_right(40)
+        .y_label_area_size(70)
         .build_cartesian_2d(0.0..1.0, lo..hi.max(lo + 1e-9))
         .map_err(err)?;
     cb.configure_mesh()
@@ -316,8 +317,23 @@ pub fn sweep_svg(path: &str, shapes: &[(f64, Workspace)]) -> Result<()> {
         .map_err(err)?;
     for (r, ws) in shapes {
         let t = if r1 > r0 { (r - r0) / (r1 - r0) } else { 0.5 };
-        segments(&mut c2, &ws.contour(), colour_map(t).stroke_width(1))?;
+        let col = colour_map(t);
+        segments(&mut c2, &ws.contour(), col.stroke_width(1))?;
+        c2.draw_series(std::iter::once(PathElement::new(
+            vec![(0.0, 0.0)],
+            col.stroke_width(2),
+        )))
+        .map_err(err)?
+        .label(format!("{r:.0} mm"))
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], col.stroke_width(2)));
     }
+    c2.configure_series_labels()
+        .label_font((FONT_FAMILY, 12))
+        .background_style(WHITE.mix(0.9))
+        .border_style(BLACK)
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()
+        .map_err(err)?;
     root.present().map_err(err)?;
     Ok(())
 }
