@@ -5,7 +5,7 @@ use crate::pose::Pose;
 use pcr_robot::{geometry as g, RobotConfig, Vec2, WorkingMode};
 
 /// Number of grid points of the per-leg bending-angle table used to bracket IK roots.
-pub(crate) const TABLE_N: usize = 49;
+pub(crate) const TABLE_N: usize = 33;
 
 /// Tabulated local tip positions of a leg over the scanned bending range.
 #[derive(Debug, Clone)]
