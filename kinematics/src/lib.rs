@@ -6,6 +6,7 @@
 //! - the robot-independent model: leg forward kinematics ([`leg`]), loop closure, IK ([`ik`]),
 //!   FK ([`fk`]), Jacobians and singularities ([`jacobian`]) and the workspace ([`workspace`]).
 
+pub mod check;
 pub mod fk;
 pub mod ik;
 pub mod jacobian;
@@ -15,6 +16,7 @@ pub mod pose;
 pub mod tendon;
 pub mod workspace;
 
+pub use check::{CheckOptions, MotionRejected, Violation};
 pub use fk::FkError;
 pub use ik::{IkError, IkSolution, LegRoot, LegRoots};
 pub use jacobian::Conditioning;
