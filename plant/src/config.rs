@@ -233,7 +233,7 @@ impl PlantConfig {
                 ei_n_mm2: 6.5e4,
                 k_m_n_mm_per_rad: 0.0,
                 k_p_n_mm_per_rad: 0.0,
-                segment_steps: 100,
+                segment_steps: 50,
             },
             external_wrench: ExternalWrench::default(),
             geometry: GeometryDeviation {
@@ -287,7 +287,7 @@ impl PlantConfig {
             },
             simulation: Simulation {
                 cycle_s: 0.02,
-                substeps_per_cycle: 4,
+                substeps_per_cycle: 2,
             },
         }
     }

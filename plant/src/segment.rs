@@ -31,12 +31,34 @@ pub struct SegmentEnd {
     pub jac: [[f64; 3]; 4],
 }
 
+/// (sin, cos) of a small angle by its Taylor series (error below 1e-18 for |d| <= 0.1 rad),
+/// falling back to `sin_cos` for larger angles. The integrators track (cos, sin) of theta from
+/// step to step with it instead of calling `sin_cos` at every stage.
+#[inline(always)]
+fn small_sin_cos(d: f64) -> (f64, f64) {
+    if d.abs() > 0.1 {
+        return d.sin_cos();
+    }
+    let d2 = d * d;
+    let s = d * (1.0 - d2 / 6.0 * (1.0 - d2 / 20.0 * (1.0 - d2 / 42.0 * (1.0 - d2 / 72.0))));
+    let c = 1.0
+        - d2 / 2.0 * (1.0 - d2 / 12.0 * (1.0 - d2 / 30.0 * (1.0 - d2 / 56.0 * (1.0 - d2 / 90.0))));
+    (s, c)
+}
+
+/// (sin, cos) of theta0 + d from (s0, c0) of theta0.
+#[inline(always)]
+fn rotated(s0: f64, c0: f64, d: f64) -> (f64, f64) {
+    let (sd, cd) = small_sin_cos(d);
+    (s0 * cd + c0 * sd, c0 * cd - s0 * sd)
+}
+
 /// State plus the 4x3 sensitivity matrix, flattened: [x, y, th, m, S(4x3) row-major].
 type State = [f64; 16];
 
 #[inline(always)]
-fn rhs(y: &State, inv_ei: f64, fx: f64, fy: f64) -> State {
-    let (s, c) = y[2].sin_cos();
+fn rhs(y: &State, sc: (f64, f64), inv_ei: f64, fx: f64, fy: f64) -> State {
+    let (s, c) = sc;
     let mut d = [0.0; 16];
     d[0] = c;
     d[1] = s;
@@ -76,14 +98,20 @@ pub fn integrate(p: &SegmentParams, m0: f64, f: [f64; 2]) -> SegmentEnd {
     let h = p.length / n as f64;
     let inv_ei = 1.0 / p.ei;
     let (fx, fy) = (f[0], f[1]);
+    let (mut s0, mut c0) = p.theta0.sin_cos();
     for _ in 0..n {
-        let k1 = rhs(&y, inv_ei, fx, fy);
-        let k2 = rhs(&axpy(&y, 0.5 * h, &k1), inv_ei, fx, fy);
-        let k3 = rhs(&axpy(&y, 0.5 * h, &k2), inv_ei, fx, fy);
-        let k4 = rhs(&axpy(&y, h, &k3), inv_ei, fx, fy);
+        let th = y[2];
+        let k1 = rhs(&y, (s0, c0), inv_ei, fx, fy);
+        let y2 = axpy(&y, 0.5 * h, &k1);
+        let k2 = rhs(&y2, rotated(s0, c0, y2[2] - th), inv_ei, fx, fy);
+        let y3 = axpy(&y, 0.5 * h, &k2);
+        let k3 = rhs(&y3, rotated(s0, c0, y3[2] - th), inv_ei, fx, fy);
+        let y4 = axpy(&y, h, &k3);
+        let k4 = rhs(&y4, rotated(s0, c0, y4[2] - th), inv_ei, fx, fy);
         for i in 0..16 {
             y[i] += h / 6.0 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]);
         }
+        (s0, c0) = rotated(s0, c0, y[2] - th);
     }
     let mut jac = [[0.0; 3]; 4];
     for (r, row) in jac.iter_mut().enumerate() {
@@ -91,6 +119,54 @@ pub fn integrate(p: &SegmentParams, m0: f64, f: [f64; 2]) -> SegmentEnd {
             *v = y[4 + 3 * r + c];
         }
     }
+    SegmentEnd {
+        pos: [y[0], y[1]],
+        theta: y[2],
+        moment: y[3],
+        jac,
+    }
+}
+
+/// Integrates the segment like [`integrate`] but carries only the sensitivity to m(0) of theta
+/// and m (the Jacobi field): `jac` holds d theta / d m0 in `jac[2][0]` and d m / d m0 in
+/// `jac[3][0]`, every other entry is zero. About three times cheaper than [`integrate`].
+pub fn integrate_light(p: &SegmentParams, m0: f64, f: [f64; 2]) -> SegmentEnd {
+    let n = p.steps.max(1);
+    let h = p.length / n as f64;
+    let inv_ei = 1.0 / p.ei;
+    let (fx, fy) = (f[0], f[1]);
+    let g = |y: &[f64; 6], (s, c): (f64, f64)| -> [f64; 6] {
+        [
+            c,
+            s,
+            y[3] * inv_ei,
+            fx * s - fy * c,
+            y[5] * inv_ei,
+            (fx * c + fy * s) * y[4],
+        ]
+    };
+    let add = |y: &[f64; 6], a: f64, k: &[f64; 6]| -> [f64; 6] {
+        std::array::from_fn(|i| y[i] + a * k[i])
+    };
+    let mut y = [0.0, 0.0, p.theta0, m0, 0.0, 1.0];
+    let (mut s0, mut c0) = p.theta0.sin_cos();
+    for _ in 0..n {
+        let th = y[2];
+        let k1 = g(&y, (s0, c0));
+        let y2 = add(&y, 0.5 * h, &k1);
+        let k2 = g(&y2, rotated(s0, c0, y2[2] - th));
+        let y3 = add(&y, 0.5 * h, &k2);
+        let k3 = g(&y3, rotated(s0, c0, y3[2] - th));
+        let y4 = add(&y, h, &k3);
+        let k4 = g(&y4, rotated(s0, c0, y4[2] - th));
+        for i in 0..6 {
+            y[i] += h / 6.0 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]);
+        }
+        (s0, c0) = rotated(s0, c0, y[2] - th);
+    }
+    let mut jac = [[0.0; 3]; 4];
+    jac[2][0] = y[4];
+    jac[3][0] = y[5];
     SegmentEnd {
         pos: [y[0], y[1]],
         theta: y[2],
@@ -176,6 +252,28 @@ mod tests {
                 e.pos[1]
             );
         }
+    }
+
+    #[test]
+    fn small_angle_sin_cos_is_exact() {
+        for k in -200..=200 {
+            let d = k as f64 * 0.0005;
+            let (s, c) = small_sin_cos(d);
+            assert!(
+                (s - d.sin()).abs() < 1e-16 && (c - d.cos()).abs() < 2e-16,
+                "{d}"
+            );
+        }
+    }
+
+    #[test]
+    fn light_integration_agrees_with_the_full_one() {
+        let p = params(100);
+        let a = integrate(&p, -150.0, [0.7, -1.3]);
+        let b = integrate_light(&p, -150.0, [0.7, -1.3]);
+        assert_eq!((a.pos, a.theta, a.moment), (b.pos, b.theta, b.moment));
+        assert!((a.jac[2][0] - b.jac[2][0]).abs() < 1e-15);
+        assert!((a.jac[3][0] - b.jac[3][0]).abs() < 1e-12);
     }
 
     #[test]

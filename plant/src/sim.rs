@@ -6,7 +6,10 @@ use crate::actuator::{Actuator, StepperParams};
 use crate::capture::{CaptureModel, Measurement};
 use crate::config::{PlantConfig, PlantConfigError};
 use crate::segment::{self, SegmentParams};
-use crate::statics::{Equilibrium, FrictionAnchors, FrictionParams, Loads, StaticsError};
+use crate::statics::{
+    joint_anchor_after, support_anchor_after, Equilibrium, FrictionAnchors, FrictionParams,
+    JacobianCache, Loads, StaticsError,
+};
 use crate::truth::TruthModel;
 use pcr_driver::{Driver, DriverError, DriverState, MotorCommand};
 use pcr_robot::geometry::{add, Vec2};
@@ -69,6 +72,8 @@ pub struct Plant {
     fault: bool,
     target: [i32; 3],
     name: String,
+    fallbacks: u64,
+    jac_cache: Option<JacobianCache>,
 }
 
 impl Plant {
@@ -140,6 +145,8 @@ impl Plant {
             fault: false,
             target: home,
             name: "plant".into(),
+            fallbacks: 0,
+            jac_cache: None,
             truth,
             cfg: cfg.clone(),
         })
@@ -158,6 +165,11 @@ impl Plant {
     /// The capture model (frame, noise, latency, rate).
     pub fn capture_model(&self) -> &CaptureModel {
         &self.capture
+    }
+
+    /// How many sub-steps needed the continuation fallback (warm Newton failed).
+    pub fn fallbacks(&self) -> u64 {
+        self.fallbacks
     }
 
     /// Simulated time, s.
@@ -260,14 +272,20 @@ impl Plant {
             wrench: self.truth.wrench,
             friction: self.friction.map(|f| (f, self.anchors)),
         };
-        let unchanged = bending == self.state.bending && self.friction.is_none();
+        // Unchanged bending: the same equilibrium (a slipped friction anchor keeps its force).
+        let unchanged = bending == self.state.bending;
         let eq = if unchanged {
             self.state.eq.clone()
         } else {
-            match self.truth.statics.solve_warm(&loads, &self.state.eq.z) {
+            match self.truth.statics.solve_warm_cached(
+                &loads,
+                &self.state.eq.z,
+                &mut self.jac_cache,
+            ) {
                 Ok(eq) => eq,
                 // A large jump (e.g. many steps at once): follow the path from the last state.
                 Err(_) => {
+                    self.fallbacks += 1;
                     let mut from = loads;
                     from.phi_b = self.state.bending;
                     self.truth
@@ -301,28 +319,14 @@ impl Plant {
         let a = &mut self.anchors;
         for i in 0..3 {
             if f.joint_torque > 0.0 {
-                let k = f.joint_stiffness;
-                let slip = |angle: f64, anchor: f64| {
-                    let tau = (-k * (angle - anchor)).clamp(-f.joint_torque, f.joint_torque);
-                    angle + tau / k
-                };
-                a.gamma[i] = slip(eq.gamma[i], a.gamma[i]);
-                a.zeta[i] = slip(eq.zeta[i], a.zeta[i]);
+                let (k, l) = (f.joint_stiffness, f.joint_torque);
+                a.gamma[i] = joint_anchor_after(k, l, eq.gamma[i], a.gamma[i]);
+                a.zeta[i] = joint_anchor_after(k, l, eq.zeta[i], a.zeta[i]);
             }
             if f.support_force > 0.0 {
-                let k = f.support_stiffness;
-                let slip = |p: Vec2, anchor: Vec2| {
-                    let d = [p[0] - anchor[0], p[1] - anchor[1]];
-                    let n = d[0].hypot(d[1]);
-                    let max = f.support_force / k;
-                    if n > max {
-                        [p[0] - d[0] * max / n, p[1] - d[1] * max / n]
-                    } else {
-                        anchor
-                    }
-                };
-                a.m[i] = slip(eq.m[i], a.m[i]);
-                a.p[i] = slip(eq.p[i], a.p[i]);
+                let (k, l) = (f.support_stiffness, f.support_force);
+                a.m[i] = support_anchor_after(k, l, eq.m[i], a.m[i]);
+                a.p[i] = support_anchor_after(k, l, eq.p[i], a.p[i]);
             }
         }
     }

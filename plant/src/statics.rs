@@ -13,6 +13,19 @@ use crate::segment::{self, SegmentEnd, SegmentParams};
 use nalgebra::{SMatrix, SVector};
 use pcr_robot::geometry::{add, cross, dot, norm, perp, rot, scale, signed_angle, sub, Vec2};
 
+/// A factorised Jacobian of the equilibrium equations, kept between solves.
+#[derive(Debug, Clone)]
+pub struct JacobianCache {
+    /// Inverse Jacobian, kept current by Broyden updates between refreshes.
+    inv: Mat,
+    /// Sign of its determinant.
+    pub det_sign: f64,
+}
+
+/// A quasi-Newton step must shrink the residual at least by this factor, else the Jacobian is
+/// refreshed.
+const CHORD_CONTRACTION: f64 = 0.5;
+
 /// Number of unknowns.
 pub const N: usize = 12;
 type Mat = SMatrix<f64, N, N>;
@@ -204,21 +217,48 @@ pub struct Equilibrium {
     pub jacobi: [f64; 3],
 }
 
-/// Jenkins element of a joint: couple on the link, N mm.
+/// How far (in units of limit / stiffness) a friction element stretches before it slips: the
+/// element's force is `limit tanh(stiffness x / limit)`, smooth so that Newton converges, and the
+/// anchor follows once `|x|` exceeds this many slip lengths (tanh(3) = 0.995).
+pub const SLIP_STRETCH: f64 = 3.0;
+
+/// Smoothed Jenkins element of a joint: couple on the link, N mm.
 #[inline]
-fn joint_friction(k: f64, limit: f64, angle: f64, anchor: f64) -> f64 {
-    (-k * (angle - anchor)).clamp(-limit, limit)
+pub fn joint_friction(k: f64, limit: f64, angle: f64, anchor: f64) -> f64 {
+    -limit * (k * (angle - anchor) / limit).tanh()
 }
 
-/// Jenkins element of a support: force on the body, N.
+/// Smoothed Jenkins element of a support: force on the body, N.
 #[inline]
-fn support_friction(k: f64, limit: f64, p: Vec2, anchor: Vec2) -> Vec2 {
-    let f = scale(-k, sub(p, anchor));
-    let n = norm(f);
-    if n > limit {
-        scale(limit / n, f)
+pub fn support_friction(k: f64, limit: f64, p: Vec2, anchor: Vec2) -> Vec2 {
+    let d = sub(p, anchor);
+    let n = norm(d);
+    if n * k < 1e-12 * limit {
+        return scale(-k, d);
+    }
+    scale(-limit * (k * n / limit).tanh() / n, d)
+}
+
+/// The anchor of a joint friction element after the body moved to `angle` (slip).
+pub fn joint_anchor_after(k: f64, limit: f64, angle: f64, anchor: f64) -> f64 {
+    let max = SLIP_STRETCH * limit / k;
+    let x = angle - anchor;
+    if x.abs() > max {
+        angle - x.signum() * max
     } else {
-        f
+        anchor
+    }
+}
+
+/// The anchor of a support friction element after the body moved to `p` (slip).
+pub fn support_anchor_after(k: f64, limit: f64, p: Vec2, anchor: Vec2) -> Vec2 {
+    let max = SLIP_STRETCH * limit / k;
+    let d = sub(p, anchor);
+    let n = norm(d);
+    if n > max {
+        sub(p, scale(max / n, d))
+    } else {
+        anchor
     }
 }
 
@@ -328,6 +368,108 @@ impl Statics {
         std::array::from_fn(|i| [ends[i].pos[0], ends[i].pos[1], ends[i].theta])
     }
 
+    fn segments_light(&self, z: &[f64; N]) -> [SegmentEnd; 3] {
+        std::array::from_fn(|i| {
+            segment::integrate_light(&self.seg_params(i), z[9 + i], [z[3 + 2 * i], z[4 + 2 * i]])
+        })
+    }
+
+    fn residual_light(&self, loads: &Loads, z: &[f64; N]) -> ([f64; N], [SegmentEnd; 3]) {
+        let ends = self.segments_light(z);
+        let a = self.algebra(loads, z, &Self::seg_out(&ends));
+        (a.r, ends)
+    }
+
+    /// The inverted Jacobian at `z` (for [`Statics::solve_cached`]); None if singular.
+    pub fn jacobian_at(&self, loads: &Loads, z: &[f64; N]) -> Option<JacobianCache> {
+        let ends = self.segments(z);
+        let lu = self.jacobian(loads, z, &ends).lu();
+        let det_sign = lu.determinant().signum();
+        Some(JacobianCache {
+            inv: lu.try_inverse()?,
+            det_sign,
+        })
+    }
+
+    /// Quasi-Newton (Broyden) iteration with an inverse Jacobian kept from earlier solves
+    /// (`cache`), refreshed only when a step stops contracting. Residual evaluations carry no
+    /// sensitivities, so a warm solve costs a few cheap shots. Checks only convergence.
+    pub fn solve_cached(
+        &self,
+        loads: &Loads,
+        guess: &[f64; N],
+        cache: &mut Option<JacobianCache>,
+    ) -> Result<Equilibrium, StaticsError> {
+        let mut z = *guess;
+        let (mut r, mut ends) = self.residual_light(loads, &z);
+        let mut nr = Self::norm_inf(&r);
+        let mut it = 0;
+        let mut fresh = false;
+        let fail = |it, nr| StaticsError::NoConvergence {
+            iterations: it,
+            residual: nr,
+        };
+        while nr > self.tol {
+            if it >= self.max_iter || !nr.is_finite() {
+                return Err(fail(it, nr));
+            }
+            if cache.is_none() {
+                *cache = self.jacobian_at(loads, &z);
+                if cache.is_none() {
+                    return Err(fail(it, nr));
+                }
+                fresh = true;
+            }
+            let c = cache.as_mut().expect("set above");
+            let rv = Vecn::from_column_slice(&r);
+            let dz = c.inv * rv;
+            let n2 = Self::norm2(&r);
+            let mut alpha = 1.0;
+            let mut accepted = false;
+            for _ in 0..if fresh { 12 } else { 1 } {
+                let zt: [f64; N] = std::array::from_fn(|k| z[k] - alpha * dz[k]);
+                let (rt, et) = self.residual_light(loads, &zt);
+                let nt = Self::norm_inf(&rt);
+                let n2t = Self::norm2(&rt);
+                let good = if fresh {
+                    n2t < n2
+                } else {
+                    n2t < CHORD_CONTRACTION * n2
+                };
+                if nt.is_finite() && (good || nt <= self.tol) {
+                    // Broyden ("good") update of the inverse: s = step, y = residual change.
+                    let sv = Vecn::from_fn(|k, _| zt[k] - z[k]);
+                    let yv = Vecn::from_column_slice(&rt) - rv;
+                    let hy = c.inv * yv;
+                    let den = sv.dot(&hy);
+                    if den.abs() > 1e-300 {
+                        let sth = sv.transpose() * c.inv;
+                        c.inv += (sv - hy) * sth / den;
+                    }
+                    z = zt;
+                    r = rt;
+                    ends = et;
+                    nr = nt;
+                    accepted = true;
+                    break;
+                }
+                alpha *= 0.5;
+            }
+            it += 1;
+            if !accepted {
+                if fresh {
+                    return Err(fail(it, nr));
+                }
+                // Slow contraction with an old Jacobian: refresh it here.
+                *cache = None;
+            } else {
+                fresh = false;
+            }
+        }
+        let det_sign = cache.as_ref().map_or(0.0, |c| c.det_sign);
+        Ok(self.finish(loads, z, &ends, nr, it, det_sign))
+    }
+
     fn residual(&self, loads: &Loads, z: &[f64; N]) -> ([f64; N], [SegmentEnd; 3]) {
         let ends = self.segments(z);
         let a = self.algebra(loads, z, &Self::seg_out(&ends));
@@ -387,6 +529,10 @@ impl Statics {
         r.iter().fold(0.0f64, |m, v| m.max(v.abs()))
     }
 
+    fn norm2(r: &[f64; N]) -> f64 {
+        r.iter().map(|v| v * v).sum::<f64>().sqrt()
+    }
+
     /// Newton from `guess`. Checks only convergence (see [`Statics::check`] for the ranges).
     pub fn solve_from(&self, loads: &Loads, guess: &[f64; N]) -> Result<Equilibrium, StaticsError> {
         let mut z = *guess;
@@ -428,7 +574,7 @@ impl Statics {
                 }
                 let (rt, et) = self.residual(loads, &zt);
                 let nt = Self::norm_inf(&rt);
-                if nt.is_finite() && (nt < nr || nt <= self.tol) {
+                if nt.is_finite() && (Self::norm2(&rt) < Self::norm2(&r) || nt <= self.tol) {
                     z = zt;
                     r = rt;
                     ends = et;
@@ -541,7 +687,20 @@ impl Statics {
     /// Warm-started solve with range checks.
     pub fn solve_warm(&self, loads: &Loads, guess: &[f64; N]) -> Result<Equilibrium, StaticsError> {
         self.check_bending(&loads.phi_b)?;
-        let eq = self.solve_from(loads, guess)?;
+        let eq = self.solve_cached(loads, guess, &mut None)?;
+        self.check(&eq)?;
+        Ok(eq)
+    }
+
+    /// Warm-started solve with range checks, reusing (and updating) a Jacobian cache.
+    pub fn solve_warm_cached(
+        &self,
+        loads: &Loads,
+        guess: &[f64; N],
+        cache: &mut Option<JacobianCache>,
+    ) -> Result<Equilibrium, StaticsError> {
+        self.check_bending(&loads.phi_b)?;
+        let eq = self.solve_cached(loads, guess, cache)?;
         self.check(&eq)?;
         Ok(eq)
     }
@@ -574,13 +733,12 @@ impl Statics {
             l
         };
         let mut s = 0.0;
-        let mut cur = start.clone();
         let mut prev: Option<(f64, [f64; N])> = None;
-        let sign0 = if start.det_sign != 0.0 {
-            start.det_sign
-        } else {
-            self.solve_from(start_loads, &start.z)?.det_sign
-        };
+        // The assembly-mode indicator of this path's model at its start (friction or a wrench
+        // change the model, and with it the sign of the Jacobian's determinant).
+        let cur0 = self.solve_from(&lerp(0.0), &start.z)?;
+        let sign0 = cur0.det_sign;
+        let mut cur = cur0;
         while s < 1.0 {
             let s1 = (s + ds).min(1.0);
             // Secant predictor.
