@@ -127,7 +127,7 @@ impl Plant {
         };
         let mut history = VecDeque::new();
         history.push_back((0.0, state.eq.pose, state.eq.m));
-        Ok(Plant {
+        let mut plant = Plant {
             stepper,
             friction,
             capture: CaptureModel::new(&cfg.capture),
@@ -149,7 +149,9 @@ impl Plant {
             jac_cache: None,
             truth,
             cfg: cfg.clone(),
-        })
+        };
+        plant.sample_until(0.0);
+        Ok(plant)
     }
 
     /// The static truth model behind the plant.
