@@ -332,7 +332,7 @@ impl PlantConfig {
             joint_torque_n_mm: 2.0,
             joint_stick_stiffness_n_mm_per_rad: 1.0e4,
             supports: true,
-            support_force_n: 0.08,
+            support_force_n: 0.04,
             support_stick_stiffness_n_per_mm: 20.0,
         };
         c.capture = Capture {

@@ -281,3 +281,50 @@ fn same_seed_same_run() {
     };
     assert_eq!(run(), run());
 }
+
+/// ISO 9283 pose repeatability of the prototype-like plant: one target approached from random
+/// directions; RP = mean distance to the barycentre + 3 standard deviations. The prototype's is
+/// about 1.2 mm.
+#[test]
+fn prototype_repeatability_resembles_the_prototype() {
+    use rand::{Rng, SeedableRng};
+    let mut plant = Plant::new(&RobotConfig::nominal(), &PlantConfig::prototype()).unwrap();
+    let home = plant.home_steps();
+    let target = [home[0] + 40, home[1] - 30, home[2] + 10];
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+    let mut t = 0.0;
+    let mut pts = Vec::new();
+    for _ in 0..30 {
+        let via: [i32; 3] = std::array::from_fn(|i| target[i] + rng.random_range(-120..=120));
+        for q in [via, target] {
+            // Move at up to 8 steps per cycle, then settle for 0.5 s.
+            loop {
+                let cur = plant.true_state().counter;
+                let next: [i32; 3] = std::array::from_fn(|i| cur[i] + (q[i] - cur[i]).clamp(-8, 8));
+                plant.write(t, CYCLE, &cmd(next)).unwrap();
+                t += CYCLE;
+                if next == q {
+                    break;
+                }
+            }
+            plant.idle_until(t + 0.5).unwrap();
+            t += 0.5;
+        }
+        let p = plant.true_state().eq.pose;
+        pts.push([p[0], p[1]]);
+    }
+    let n = pts.len() as f64;
+    let c = [
+        pts.iter().map(|p| p[0]).sum::<f64>() / n,
+        pts.iter().map(|p| p[1]).sum::<f64>() / n,
+    ];
+    let l: Vec<f64> = pts
+        .iter()
+        .map(|p| (p[0] - c[0]).hypot(p[1] - c[1]))
+        .collect();
+    let lm = l.iter().sum::<f64>() / n;
+    let sl = (l.iter().map(|v| (v - lm).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+    let rp = lm + 3.0 * sl;
+    eprintln!("ISO 9283 repeatability of the prototype plant: {rp:.3} mm (mean {lm:.3} mm)");
+    assert!(rp > 0.6 && rp < 2.0, "{rp}");
+}
