@@ -265,6 +265,24 @@ pub fn support_anchor_after(k: f64, limit: f64, p: Vec2, anchor: Vec2) -> Vec2 {
 /// Per-segment outputs the algebraic part uses: tip (x, y) relative to the base and theta(l_C).
 type SegOut = [[f64; 3]; 3];
 
+/// What one leg contributes to the residual.
+struct LegTerms {
+    /// Tendon constraint (mm), link length (mm), link moment balance (N).
+    r: [f64; 3],
+    /// Force on the platform (link + support friction at P), N.
+    force: Vec2,
+    /// Its moment about E plus the joint couple at P, N mm.
+    moment: f64,
+    tip: Vec2,
+    m: Vec2,
+    p: Vec2,
+    gamma: f64,
+    zeta: f64,
+    f: Vec2,
+    tau: [f64; 2],
+    fs: [Vec2; 2],
+}
+
 struct Algebra {
     r: [f64; N],
     tip: [Vec2; 3],
@@ -293,6 +311,70 @@ impl Statics {
         })
     }
 
+    /// The algebraic terms of leg `i` for the platform pose, the segment's tip load and its tip
+    /// (x, y relative to the base, theta).
+    fn leg_terms(
+        &self,
+        i: usize,
+        loads: &Loads,
+        pose: [f64; 3],
+        load: Vec2,
+        s: [f64; 3],
+    ) -> LegTerms {
+        let g = &self.legs[i];
+        let sp = &self.springs;
+        let tip = add(g.base, [s[0], s[1]]);
+        let th = s[2];
+        let t = [th.cos(), th.sin()];
+        let m = add(tip, scale(g.l_ce, t));
+        let pe = rot(pose[2], g.p_e);
+        let p = add([pose[0], pose[1]], pe);
+        let d = sub(p, m);
+        let len = norm(d);
+        let u = scale(1.0 / len, d);
+        let n = perp(u);
+        let gamma = signed_angle(t, u);
+        let zeta = signed_angle(pe, scale(-1.0, u));
+        let mut tau_m = -sp.k_m * (gamma - sp.gamma0[i]);
+        let mut tau_p = -sp.k_p * (zeta - sp.zeta0[i]);
+        let mut f_m = [0.0, 0.0];
+        let mut f_p = [0.0, 0.0];
+        if let Some((fp, an)) = &loads.friction {
+            if fp.joint_torque > 0.0 {
+                tau_m += joint_friction(fp.joint_stiffness, fp.joint_torque, gamma, an.gamma[i]);
+                tau_p += joint_friction(fp.joint_stiffness, fp.joint_torque, zeta, an.zeta[i]);
+            }
+            if fp.support_force > 0.0 {
+                f_m = support_friction(fp.support_stiffness, fp.support_force, m, an.m[i]);
+                f_p = support_friction(fp.support_stiffness, fp.support_force, p, an.p[i]);
+            }
+        }
+        let f = sub(f_m, load);
+        let fp_total = add(f, f_p);
+        LegTerms {
+            r: [
+                (th - g.theta0 + loads.phi_b[i]) * g.l_c,
+                len - g.l_st,
+                dot(f, n) - (tau_m + tau_p) / g.l_st,
+            ],
+            force: fp_total,
+            moment: cross(pe, fp_total) - tau_p,
+            tip,
+            m,
+            p,
+            gamma,
+            zeta,
+            f,
+            tau: [tau_m, tau_p],
+            fs: [f_m, f_p],
+        }
+    }
+
+    /// Scale of the platform's moment equation (N mm -> N).
+    fn moment_scale(&self) -> f64 {
+        1.0 / self.legs[0].p_e[0].hypot(self.legs[0].p_e[1]).max(1.0)
+    }
+
     /// The algebraic part of the residual, given the segment outputs.
     fn algebra(&self, loads: &Loads, z: &[f64; N], s: &SegOut) -> Algebra {
         let mut a = Algebra {
@@ -306,61 +388,28 @@ impl Statics {
             tau: [[0.0; 2]; 3],
             fs: [[[0.0; 2]; 2]; 3],
         };
-        let e = [z[0], z[1]];
-        let phi = z[2];
+        let pose = [z[0], z[1], z[2]];
         let mut fsum = [loads.wrench[0], loads.wrench[1]];
         let mut msum = loads.wrench[2];
-        let sp = &self.springs;
         for i in 0..3 {
-            let g = &self.legs[i];
-            let tip = add(g.base, [s[i][0], s[i][1]]);
-            let th = s[i][2];
-            let t = [th.cos(), th.sin()];
-            let m = add(tip, scale(g.l_ce, t));
-            let pe = rot(phi, g.p_e);
-            let p = add(e, pe);
-            let d = sub(p, m);
-            let len = norm(d);
-            let u = scale(1.0 / len, d);
-            let n = perp(u);
-            let gamma = signed_angle(t, u);
-            let zeta = signed_angle(pe, scale(-1.0, u));
-            let mut tau_m = -sp.k_m * (gamma - sp.gamma0[i]);
-            let mut tau_p = -sp.k_p * (zeta - sp.zeta0[i]);
-            let mut f_m = [0.0, 0.0];
-            let mut f_p = [0.0, 0.0];
-            if let Some((fp, an)) = &loads.friction {
-                if fp.joint_torque > 0.0 {
-                    tau_m +=
-                        joint_friction(fp.joint_stiffness, fp.joint_torque, gamma, an.gamma[i]);
-                    tau_p += joint_friction(fp.joint_stiffness, fp.joint_torque, zeta, an.zeta[i]);
-                }
-                if fp.support_force > 0.0 {
-                    f_m = support_friction(fp.support_stiffness, fp.support_force, m, an.m[i]);
-                    f_p = support_friction(fp.support_stiffness, fp.support_force, p, an.p[i]);
-                }
-            }
-            let load = [z[3 + 2 * i], z[4 + 2 * i]];
-            let f = sub(f_m, load);
-            a.r[i] = (th - g.theta0 + loads.phi_b[i]) * g.l_c;
-            a.r[3 + i] = len - g.l_st;
-            a.r[6 + i] = dot(f, n) - (tau_m + tau_p) / g.l_st;
-            let fp_total = add(f, f_p);
-            fsum = add(fsum, fp_total);
-            msum += cross(pe, fp_total) - tau_p;
-            a.tip[i] = tip;
-            a.m[i] = m;
-            a.p[i] = p;
-            a.gamma[i] = gamma;
-            a.zeta[i] = zeta;
-            a.f[i] = f;
-            a.tau[i] = [tau_m, tau_p];
-            a.fs[i] = [f_m, f_p];
+            let l = self.leg_terms(i, loads, pose, [z[3 + 2 * i], z[4 + 2 * i]], s[i]);
+            a.r[i] = l.r[0];
+            a.r[3 + i] = l.r[1];
+            a.r[6 + i] = l.r[2];
+            fsum = add(fsum, l.force);
+            msum += l.moment;
+            a.tip[i] = l.tip;
+            a.m[i] = l.m;
+            a.p[i] = l.p;
+            a.gamma[i] = l.gamma;
+            a.zeta[i] = l.zeta;
+            a.f[i] = l.f;
+            a.tau[i] = l.tau;
+            a.fs[i] = l.fs;
         }
-        let r_p = self.legs[0].p_e[0].hypot(self.legs[0].p_e[1]).max(1.0);
         a.r[9] = fsum[0];
         a.r[10] = fsum[1];
-        a.r[11] = msum / r_p;
+        a.r[11] = msum * self.moment_scale();
         a
     }
 
@@ -476,49 +525,71 @@ impl Statics {
         (a.r, ends)
     }
 
+    /// The Jacobian of the residual: per leg, the algebraic terms are differentiated by central
+    /// differences in their 8 inputs (pose, tip load, segment tip) and chained with the segment's
+    /// sensitivities from the variational equations.
     fn jacobian(&self, loads: &Loads, z: &[f64; N], ends: &[SegmentEnd; 3]) -> Mat {
-        let s0 = Self::seg_out(ends);
         let mut j = Mat::zeros();
-        // d G / d z (direct dependence) by central differences.
-        for c in 0..N {
-            let h = 1e-6 * (1.0 + z[c].abs());
-            let mut zp = *z;
-            let mut zm = *z;
-            zp[c] += h;
-            zm[c] -= h;
-            let rp = self.algebra(loads, &zp, &s0).r;
-            let rm = self.algebra(loads, &zm, &s0).r;
-            for r in 0..N {
-                j[(r, c)] = (rp[r] - rm[r]) / (2.0 * h);
-            }
-        }
-        // d G / d s times d s / d (m0, Fx, Fy) from the variational equations.
+        let ms = self.moment_scale();
         for i in 0..3 {
-            let mut gs = [[0.0; 3]; N];
-            for k in 0..3 {
-                let h = if k == 2 {
+            let x0 = [
+                z[0],
+                z[1],
+                z[2],
+                z[3 + 2 * i],
+                z[4 + 2 * i],
+                ends[i].pos[0],
+                ends[i].pos[1],
+                ends[i].theta,
+            ];
+            let eval = |x: &[f64; 8]| -> [f64; 6] {
+                let l = self.leg_terms(
+                    i,
+                    loads,
+                    [x[0], x[1], x[2]],
+                    [x[3], x[4]],
+                    [x[5], x[6], x[7]],
+                );
+                [
+                    l.r[0],
+                    l.r[1],
+                    l.r[2],
+                    l.force[0],
+                    l.force[1],
+                    l.moment * ms,
+                ]
+            };
+            // d (leg outputs) / d (inputs), 6 x 8.
+            let mut d = [[0.0; 8]; 6];
+            for c in 0..8 {
+                let h = if c == 2 || c == 7 {
                     1e-7
                 } else {
-                    1e-6 * (1.0 + s0[i][k].abs())
+                    1e-6 * (1.0 + x0[c].abs())
                 };
-                let mut sp = s0;
-                let mut sm = s0;
-                sp[i][k] += h;
-                sm[i][k] -= h;
-                let rp = self.algebra(loads, z, &sp).r;
-                let rm = self.algebra(loads, z, &sm).r;
-                for r in 0..N {
-                    gs[r][k] = (rp[r] - rm[r]) / (2.0 * h);
+                let mut xp = x0;
+                let mut xm = x0;
+                xp[c] += h;
+                xm[c] -= h;
+                let (op, om) = (eval(&xp), eval(&xm));
+                for r in 0..6 {
+                    d[r][c] = (op[r] - om[r]) / (2.0 * h);
                 }
             }
-            let cols = [9 + i, 3 + 2 * i, 4 + 2 * i];
-            for r in 0..N {
-                for (q, &c) in cols.iter().enumerate() {
+            let rows = [i, 3 + i, 6 + i, 9, 10, 11];
+            let seg_cols = [9 + i, 3 + 2 * i, 4 + 2 * i];
+            for (r, &row) in rows.iter().enumerate() {
+                for c in 0..3 {
+                    j[(row, c)] += d[r][c];
+                }
+                j[(row, 3 + 2 * i)] += d[r][3];
+                j[(row, 4 + 2 * i)] += d[r][4];
+                for (q, &col) in seg_cols.iter().enumerate() {
                     let mut v = 0.0;
-                    for (k, g) in gs[r].iter().enumerate() {
-                        v += g * ends[i].jac[k][q];
+                    for k in 0..3 {
+                        v += d[r][5 + k] * ends[i].jac[k][q];
                     }
-                    j[(r, c)] += v;
+                    j[(row, col)] += v;
                 }
             }
         }
