@@ -552,3 +552,67 @@ fn register_font() -> bool {
     }
     false
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tmp(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("pcr-plant-cli-{}", std::process::id()));
+        std::fs::create_dir_all(&d).unwrap();
+        d.join(name)
+    }
+
+    /// Every effect off: the recording's measured pose at row k is the static model at the
+    /// setpoint of row k - 1 (reached within its cycle), and equals the true columns.
+    #[test]
+    fn ideal_recording_equals_the_static_model() {
+        let robot = RobotConfig::nominal();
+        let cfg = PlantConfig::ideal();
+        let input = tmp("setpoints.csv");
+        let mut text = String::from("t_s,q1,q2,q3\n");
+        for k in 0..40 {
+            let q = [176 + k, 176 - k / 2, 176 + k / 3];
+            text += &format!("{:.2},{},{},{}\n", k as f64 * 0.02, q[0], q[1], q[2]);
+        }
+        std::fs::write(&input, text).unwrap();
+        let output = tmp("rec.csv");
+        let common = Common {
+            plant: None,
+            robot: None,
+        };
+        run_series(&robot, &cfg, &common, &input, &output, false).unwrap();
+        let rec = pcr_recording::Recording::read_path(&output).unwrap();
+        assert_eq!(rec.rows.len(), 40);
+        let truth = TruthModel::new(&robot, &cfg).unwrap();
+        let ix = rec.extra_index("x_true_mm").unwrap();
+        for k in 1..rec.rows.len() {
+            let q = rec.rows[k - 1].q.map(f64::from);
+            let eq = truth.solve_steps(&q).unwrap();
+            let p = rec.rows[k].measured_pose().unwrap();
+            assert!((p[0] - eq.pose[0]).abs() < 1e-6, "row {k}");
+            assert!((p[1] - eq.pose[1]).abs() < 1e-6, "row {k}");
+            assert!((p[2] - eq.pose[2].to_degrees()).abs() < 1e-6, "row {k}");
+            let xt: f64 = rec.rows[k].extra[ix].as_deref().unwrap().parse().unwrap();
+            assert!((xt - p[0]).abs() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn pose_names_the_bad_line() {
+        let input = tmp("steps.csv");
+        std::fs::write(&input, "q1,q2,q3\n176,176,176\n176,x,176\n").unwrap();
+        let out = tmp("pose.csv");
+        let e = pose(
+            &RobotConfig::nominal(),
+            &PlantConfig::ideal(),
+            &input,
+            Some(&out),
+        )
+        .unwrap_err();
+        let e = format!("{e:#}");
+        assert!(e.contains("line 3") && e.contains("q2"), "{e}");
+        let text = std::fs::read_to_string(&out).unwrap();
+        assert!(text.starts_with("q1,q2,q3,x_mm"), "{text}");
+    }
+}

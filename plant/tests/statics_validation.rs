@@ -380,3 +380,68 @@ fn limit_load_is_reported() {
     l.wrench = [0.0, 0.0, -250.0];
     assert!(t.solve_loads(&l).is_ok());
 }
+
+/// A stateless solve lands in the robot's working and assembly mode: for random poses of the
+/// workspace, the bending of the CC IK (branch gamma < 0) gives back the same pose.
+#[test]
+fn stateless_solve_keeps_the_assembly_mode() {
+    use rand::{Rng, SeedableRng};
+    let t = ideal();
+    let robot = RobotConfig::nominal();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+    let mut n = 0;
+    while n < 25 {
+        let pose = [
+            rng.random_range(-70.0..70.0),
+            rng.random_range(-60.0..75.0),
+            rng.random_range(-12f64..12.0).to_radians(),
+        ];
+        let Some(phi) = (0..3)
+            .map(|i| cc_ik_bending(&robot.legs[i], pose))
+            .collect::<Option<Vec<f64>>>()
+        else {
+            continue;
+        };
+        let loads = Loads {
+            phi_b: [phi[0], phi[1], phi[2]],
+            wrench: [0.0; 3],
+            friction: None,
+        };
+        let eq = t.solve_loads(&loads).unwrap();
+        for k in 0..3 {
+            assert!(
+                (eq.pose[k] - pose[k]).abs() < 1e-6,
+                "{pose:?} -> {:?}",
+                eq.pose
+            );
+        }
+        assert!(eq.gamma.iter().all(|g| *g < 0.0));
+        n += 1;
+    }
+}
+
+/// The prototype's effects without history: the geometry deviations and the true tendon map
+/// move the home pose by millimetres / degrees, and the tendon map saturates.
+#[test]
+fn geometry_and_tendon_map_signatures() {
+    let robot = RobotConfig::nominal();
+    let ideal = ideal();
+    let mut cfg = PlantConfig::ideal();
+    cfg.geometry = PlantConfig::prototype().geometry;
+    let geo = TruthModel::new(&robot, &cfg).unwrap();
+    let d = norm(sub(
+        [geo.home.pose[0], geo.home.pose[1]],
+        [ideal.home.pose[0], ideal.home.pose[1]],
+    ));
+    eprintln!("geometry deviations move home by {d:.3} mm");
+    assert!(d > 0.1 && d < 5.0, "{d}");
+    let proto = TruthModel::new(&robot, &PlantConfig::prototype()).unwrap();
+    for i in 0..3 {
+        let m = proto.robot.maps[i];
+        let slope = |dl: f64| (m.bending(dl + 1e-4) - m.bending(dl - 1e-4)) / 2e-4;
+        // Stiffening tendon: the slope falls with the displacement, and is odd around dl0.
+        assert!(slope(15.0) < 0.9 * slope(m.dl0));
+        assert!((m.bending(m.dl0 + 5.0) + m.bending(m.dl0 - 5.0)).abs() < 1e-12);
+        assert!((slope(m.dl0) * m.a - m.gain).abs() < 1e-9);
+    }
+}
