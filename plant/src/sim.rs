@@ -74,6 +74,8 @@ pub struct Plant {
     name: String,
     fallbacks: u64,
     jac_cache: Option<JacobianCache>,
+    /// Sign of det(Jacobian) of the statics at home (with this plant's friction): stable.
+    stable_sign: f64,
 }
 
 impl Plant {
@@ -125,6 +127,14 @@ impl Plant {
             bending: loads.phi_b,
             eq,
         };
+        let home_loads = Loads {
+            friction: friction.map(|f| (f, anchors)),
+            ..loads
+        };
+        let stable_sign = truth
+            .statics
+            .jacobian_at(&home_loads, &eq_home_z(&state))
+            .map_or(1.0, |c| c.det_sign);
         let mut history = VecDeque::new();
         history.push_back((0.0, state.eq.pose, state.eq.m));
         let mut plant = Plant {
@@ -147,6 +157,7 @@ impl Plant {
             name: "plant".into(),
             fallbacks: 0,
             jac_cache: None,
+            stable_sign,
             truth,
             cfg: cfg.clone(),
         };
@@ -200,11 +211,32 @@ impl Plant {
     }
 
     /// Runs one control cycle of length `period` s towards the setpoint `cmd`.
-    /// On a failed static solve the plant rolls back to the cycle start and reports the error.
+    /// On a failed static solve the motion is rolled back, the drive holds its position for the
+    /// cycle, reports `fault` and the error is returned.
     pub fn step_cycle(&mut self, period: f64, cmd: &MotorCommand) -> Result<(), PlantError> {
-        let t0 = self.state.t_s;
         self.enabled = cmd.enable;
         self.target = cmd.steps;
+        match self.run_cycle(period, cmd) {
+            Ok(()) => {
+                self.fault = false;
+                Ok(())
+            }
+            Err(e) => {
+                // The drive holds its position for the cycle and reports a fault.
+                self.fault = true;
+                let hold = MotorCommand {
+                    steps: self.state.counter,
+                    enable: cmd.enable,
+                };
+                self.run_cycle(period, &hold)?;
+                Err(e.into())
+            }
+        }
+    }
+
+    /// One cycle; on a failed solve everything is rolled back to the cycle start.
+    fn run_cycle(&mut self, period: f64, cmd: &MotorCommand) -> Result<(), StaticsError> {
+        let t0 = self.state.t_s;
         let backup = (
             self.act.clone(),
             self.creep,
@@ -231,11 +263,10 @@ impl Plant {
                 self.measurements
                     .truncate(marks.1.min(self.measurements.len()));
                 self.next_sample = marks.2;
-                self.fault = true;
-                return Err(e.into());
+                self.jac_cache = None;
+                return Err(e);
             }
         }
-        self.fault = false;
         Ok(())
     }
 
@@ -248,7 +279,7 @@ impl Plant {
                 steps: self.state.counter,
                 enable: self.enabled,
             };
-            self.step_cycle(dt, &cmd)?;
+            self.run_cycle(dt, &cmd)?;
         }
         Ok(())
     }
@@ -279,23 +310,44 @@ impl Plant {
         let eq = if unchanged {
             self.state.eq.clone()
         } else {
-            match self.truth.statics.solve_warm_cached(
-                &loads,
-                &self.state.eq.z,
-                &mut self.jac_cache,
-            ) {
-                Ok(eq) => eq,
-                // A large jump (e.g. many steps at once): follow the path from the last state.
-                Err(_) => {
+            let prev = &self.state.eq;
+            // A warm solve that lands far away has jumped to another branch (snap-through):
+            // follow the path in small steps instead, which fails at a limit point.
+            let jumped = |eq: &Equilibrium| {
+                (eq.pose[0] - prev.pose[0]).hypot(eq.pose[1] - prev.pose[1]) > MAX_JUMP_MM
+                    || (eq.pose[2] - prev.pose[2]).abs() > MAX_JUMP_RAD
+            };
+            let warm = self
+                .truth
+                .statics
+                .solve_warm_cached(&loads, &prev.z, &mut self.jac_cache)
+                .ok()
+                .filter(|eq| !jumped(eq));
+            let eq = match warm {
+                Some(eq) => eq,
+                None => {
                     self.fallbacks += 1;
                     let mut from = loads;
                     from.phi_b = self.state.bending;
-                    self.truth
-                        .statics
-                        .solve_path(&from, &self.state.eq, &loads)?
+                    self.truth.statics.solve_path(&from, prev, &loads)?
                 }
+            };
+            // Stability: the tangent stiffness keeps the sign it has at home. The fresh
+            // Jacobian also serves the next warm solve.
+            let fresh = self.truth.statics.jacobian_at(&loads, &eq.z);
+            match &fresh {
+                Some(c) if c.det_sign == self.stable_sign => {}
+                _ => return Err(StaticsError::Unstable),
             }
+            self.jac_cache = fresh;
+            eq
         };
+        if eq.det_a.signum() != self.state.eq.det_a.signum() {
+            return Err(StaticsError::AssemblyMode {
+                from: self.state.eq.det_a,
+                to: eq.det_a,
+            });
+        }
         if let Some(f) = self.friction {
             self.update_anchors(&f, &eq);
         }
@@ -373,6 +425,16 @@ impl Plant {
         let last = h.back().expect("history is never empty");
         (last.1, last.2)
     }
+}
+
+/// Largest platform translation in one sub-step of a warm solve before it counts as a jump to
+/// another branch, mm.
+const MAX_JUMP_MM: f64 = 3.0;
+/// Largest platform rotation in one sub-step of a warm solve, rad.
+const MAX_JUMP_RAD: f64 = 0.03;
+
+fn eq_home_z(s: &TrueState) -> [f64; crate::statics::N] {
+    s.eq.z
 }
 
 /// Centre lines of the three segments of an equilibrium (base frame, mm).

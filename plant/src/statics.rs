@@ -86,6 +86,19 @@ pub enum StaticsError {
         /// Magnitude of the tip load, N.
         load_n: f64,
     },
+    /// The platform would pass a type-2 singularity (det A changes sign) and leave the robot's
+    /// assembly mode.
+    #[error("the platform reaches a singularity (det A changes sign from {from:+.3e} to {to:+.3e}): it would leave the robot's assembly mode")]
+    AssemblyMode {
+        /// det A before, mm^3-ish units of geometry.md.
+        from: f64,
+        /// det A after.
+        to: f64,
+    },
+    /// The equilibrium loses its stability (the tangent stiffness of the whole robot changes
+    /// sign: snap-through or buckling of the robot).
+    #[error("the equilibrium loses its stability (snap-through or buckling of the robot)")]
+    Unstable,
     /// The equilibrium path from home ends (a singularity or limit point of the whole robot).
     #[error("no equilibrium in the robot's assembly mode: the path from home passes a singularity at {fraction:.3} of the way")]
     Singular {
@@ -213,6 +226,10 @@ pub struct Equilibrium {
     pub iterations: usize,
     /// Sign of det of the Jacobian (assembly-mode indicator along a path).
     pub det_sign: f64,
+    /// det A of the platform's loop closure h_i = |P_i - M_i|^2 - l_st^2 with respect to the
+    /// pose (x mm, y mm, phi rad) at the current M_i: its sign is the assembly mode (geometry.md:
+    /// positive at home), zero at a type-2 singularity.
+    pub det_a: f64,
     /// d theta(l_C) / d m(0) per segment (> 0: no conjugate point, no buckling), rad/(N mm).
     pub jacobi: [f64; 3],
 }
@@ -694,8 +711,17 @@ impl Statics {
             residual,
             iterations,
             det_sign,
+            det_a: 0.0,
             jacobi: std::array::from_fn(|i| ends[i].jac[2][0]),
         };
+        let rows: [[f64; 3]; 3] = std::array::from_fn(|i| {
+            let d = sub(a.p[i], a.m[i]);
+            let pe = sub(a.p[i], [z[0], z[1]]);
+            [2.0 * d[0], 2.0 * d[1], 2.0 * dot(d, perp(pe))]
+        });
+        eq.det_a = rows[0][0] * (rows[1][1] * rows[2][2] - rows[1][2] * rows[2][1])
+            - rows[0][1] * (rows[1][0] * rows[2][2] - rows[1][2] * rows[2][0])
+            + rows[0][2] * (rows[1][0] * rows[2][1] - rows[1][1] * rows[2][0]);
         for (i, end) in ends.iter().enumerate() {
             let u = scale(1.0 / self.legs[i].l_st, sub(a.p[i], a.m[i]));
             eq.lambda[i] = dot(a.f[i], u);
@@ -809,6 +835,13 @@ impl Statics {
         // change the model, and with it the sign of the Jacobian's determinant).
         let cur0 = self.solve_from(&lerp(0.0), &start.z)?;
         let sign0 = cur0.det_sign;
+        let sign_a = cur0.det_a.signum();
+        // Without friction the whole structure's tangent stiffness (det of the Jacobian) must
+        // keep its sign too (limit points); the platform's det A must in any case.
+        let same_mode = |eq: &Equilibrium| {
+            eq.det_a.signum() == sign_a
+                && (target.friction.is_some() || eq.det_sign == sign0 || eq.det_sign == 0.0)
+        };
         let mut cur = cur0;
         while s < 1.0 {
             let s1 = (s + ds).min(1.0);
@@ -822,9 +855,9 @@ impl Statics {
             }
             let loads = lerp(s1);
             match self.solve_from(&loads, &guess) {
-                Ok(eq) if eq.det_sign == sign0 || eq.det_sign == 0.0 => {
+                Ok(eq) if same_mode(&eq) => {
                     let step_ok = (0..3).all(|i| {
-                        (eq.pose[i] - cur.pose[i]).abs() < if i == 2 { 0.2 } else { 20.0 }
+                        (eq.pose[i] - cur.pose[i]).abs() < if i == 2 { 0.05 } else { 5.0 }
                     });
                     if step_ok {
                         prev = Some((s, cur.z));

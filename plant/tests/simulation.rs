@@ -328,3 +328,45 @@ fn prototype_repeatability_resembles_the_prototype() {
     eprintln!("ISO 9283 repeatability of the prototype plant: {rp:.3} mm (mean {lm:.3} mm)");
     assert!(rp > 0.6 && rp < 2.0, "{rp}");
 }
+
+/// Random setpoints inside the workspace (rate-limited moves, friction, backlash, missed steps):
+/// the plant follows without a fault.
+#[test]
+fn random_moves_in_the_workspace_run_without_fault() {
+    use rand::{Rng, SeedableRng};
+    let mut plant = Plant::new(&RobotConfig::nominal(), &PlantConfig::prototype()).unwrap();
+    let home = plant.home_steps();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+    let mut target = home;
+    for k in 0..1500 {
+        if k % 50 == 0 {
+            target = std::array::from_fn(|i| home[i] + rng.random_range(-80..80));
+        }
+        plant.write(k as f64 * CYCLE, CYCLE, &cmd(target)).unwrap();
+    }
+    let st = plant.read(1500.0 * CYCLE, CYCLE).unwrap();
+    assert!(!st.fault);
+}
+
+/// A setpoint without equilibrium: the drive reports the error and a fault and holds its
+/// position (the cycle is rolled back); the next valid setpoint is followed again.
+#[test]
+fn a_setpoint_without_equilibrium_faults_and_holds() {
+    let mut plant = ideal_with(|_| {});
+    let home = plant.home_steps();
+    let before = plant.true_state().clone();
+    let e = plant
+        .write(0.0, CYCLE, &cmd([home[0] + 1600, home[1], home[2]]))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("leg 1") && e.contains("bending"), "{e}");
+    let st = plant.read(CYCLE, CYCLE).unwrap();
+    assert!(st.fault);
+    assert_eq!(plant.true_state().counter, before.counter);
+    assert_eq!(plant.true_state().eq.pose, before.eq.pose);
+    plant
+        .write(CYCLE, CYCLE, &cmd([home[0] + 5, home[1], home[2]]))
+        .unwrap();
+    let st = plant.read(2.0 * CYCLE, CYCLE).unwrap();
+    assert!(!st.fault && st.steps[0] == home[0] + 5);
+}

@@ -445,3 +445,11 @@ fn geometry_and_tendon_map_signatures() {
         assert!((slope(m.dl0) * m.a - m.gain).abs() < 1e-9);
     }
 }
+
+/// det A of geometry.md at the home pose of the nominal robot: +3.82e9.
+#[test]
+fn det_a_at_home_matches_geometry_md() {
+    let t = ideal();
+    let (_, eq) = exact_home(&t);
+    assert!((eq.det_a / 3.82e9 - 1.0).abs() < 2e-3, "{:e}", eq.det_a);
+}
