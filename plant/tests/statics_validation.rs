@@ -453,3 +453,34 @@ fn det_a_at_home_matches_geometry_md() {
     let (_, eq) = exact_home(&t);
     assert!((eq.det_a / 3.82e9 - 1.0).abs() < 2e-3, "{:e}", eq.det_a);
 }
+
+/// Joint springs are relaxed at home (no link force there) and load the links away from home;
+/// they also make the platform stiffer against a couple.
+#[test]
+fn joint_springs_signature() {
+    let robot = RobotConfig::nominal();
+    let mut cfg = PlantConfig::ideal();
+    cfg.mechanics.k_m_n_mm_per_rad = 200.0;
+    cfg.mechanics.k_p_n_mm_per_rad = 200.0;
+    let sprung = TruthModel::new(&robot, &cfg).unwrap();
+    let free = ideal();
+    let home = sprung.robot.home_steps.map(f64::from);
+    let eq = sprung.solve_steps(&home).unwrap();
+    assert!(eq.lambda.iter().all(|l| l.abs() < 1e-9));
+    let q = [home[0] + 80.0, home[1] - 40.0, home[2]];
+    let (es, ef) = (
+        sprung.solve_steps(&q).unwrap(),
+        free.solve_steps(&q).unwrap(),
+    );
+    assert!(es.link_force.iter().any(|f| norm(*f) > 0.05));
+    assert!(ef.link_force.iter().all(|f| norm(*f) < 1e-9));
+    assert!(norm(sub([es.pose[0], es.pose[1]], [ef.pose[0], ef.pose[1]])) > 0.01);
+    let mut l = sprung.home_loads;
+    l.wrench = [0.0, 0.0, 100.0];
+    let turn_sprung = sprung.solve_loads(&l).unwrap().pose[2] - sprung.home.pose[2];
+    let turn_free = free.solve_loads(&l).unwrap().pose[2] - free.home.pose[2];
+    assert!(
+        turn_sprung < 0.9 * turn_free,
+        "{turn_sprung} vs {turn_free}"
+    );
+}
