@@ -67,6 +67,7 @@ pub struct Plant {
     history: VecDeque<(f64, [f64; 3], [Vec2; 3])>,
     next_sample: u64,
     measurements: VecDeque<Measurement>,
+    last_drained: Option<Measurement>,
     enabled: bool,
     limited: bool,
     fault: bool,
@@ -133,7 +134,7 @@ impl Plant {
         };
         let stable_sign = truth
             .statics
-            .jacobian_at(&home_loads, &eq_home_z(&state))
+            .jacobian_at(&home_loads, &state.eq.z)
             .map_or(1.0, |c| c.det_sign);
         let mut history = VecDeque::new();
         history.push_back((0.0, state.eq.pose, state.eq.m));
@@ -150,6 +151,7 @@ impl Plant {
             history,
             next_sample: 0,
             measurements: VecDeque::new(),
+            last_drained: None,
             enabled: true,
             limited: false,
             fault: false,
@@ -207,7 +209,16 @@ impl Plant {
 
     /// Capture samples reported since the last call (capture frame), oldest first.
     pub fn drain_measurements(&mut self) -> Vec<Measurement> {
-        self.measurements.drain(..).collect()
+        let out: Vec<Measurement> = self.measurements.drain(..).collect();
+        if let Some(m) = out.last() {
+            self.last_drained = Some(*m);
+        }
+        out
+    }
+
+    /// The latest capture sample reported up to now (capture frame), without consuming it.
+    pub fn latest_measurement(&self) -> Option<Measurement> {
+        self.measurements.back().copied().or(self.last_drained)
     }
 
     /// Runs one control cycle of length `period` s towards the setpoint `cmd`.
@@ -432,10 +443,6 @@ impl Plant {
 const MAX_JUMP_MM: f64 = 3.0;
 /// Largest platform rotation in one sub-step of a warm solve, rad.
 const MAX_JUMP_RAD: f64 = 0.03;
-
-fn eq_home_z(s: &TrueState) -> [f64; crate::statics::N] {
-    s.eq.z
-}
 
 /// Centre lines of the three segments of an equilibrium (base frame, mm).
 pub fn segment_shapes(truth: &TruthModel, eq: &Equilibrium) -> [Vec<Vec2>; 3] {

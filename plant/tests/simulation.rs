@@ -202,7 +202,10 @@ fn capture_frame_is_a_rigid_transform() {
     plant.write(0.0, CYCLE, &cmd(home)).unwrap();
     let s = plant.true_state().clone();
     let frame = plant.capture_model().frame;
+    let latest = plant.latest_measurement().unwrap();
     let m = *plant.drain_measurements().last().unwrap();
+    assert_eq!(m, latest);
+    assert_eq!(plant.latest_measurement(), Some(m));
     let pc = m.pose.unwrap();
     assert!((pc[2] - s.eq.pose[2] - 1.7f64.to_radians()).abs() < 1e-12);
     let r = m.in_robot_frame(&frame);
