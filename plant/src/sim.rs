@@ -54,7 +54,8 @@ pub struct TrueState {
 pub struct Plant {
     truth: TruthModel,
     cfg: PlantConfig,
-    stepper: StepperParams,
+    /// Stepper parameters per leg.
+    stepper: [StepperParams; 3],
     friction: Option<FrictionParams>,
     capture: CaptureModel,
     rng_stepper: ChaCha8Rng,
@@ -86,15 +87,17 @@ impl Plant {
         let truth = TruthModel::new(robot, cfg)?;
         let home = truth.robot.home_steps;
         let s = &cfg.stepper;
-        let stepper = StepperParams {
-            max_rate: s.rate_limit.then(|| robot.legs[0].actuation.max_step_rate),
+        let stepper = std::array::from_fn(|i| StepperParams {
+            max_rate: s
+                .rate_limit
+                .then_some(robot.legs[i].actuation.max_step_rate),
             pull_out_rate: s.missed_steps.then_some(s.pull_out_rate),
             miss_probability: if s.missed_steps {
                 s.miss_probability
             } else {
                 0.0
             },
-        };
+        });
         let f = &cfg.friction;
         let friction = (f.joints || f.supports).then_some(FrictionParams {
             joint_torque: if f.joints { f.joint_torque_n_mm } else { 0.0 },
@@ -262,7 +265,7 @@ impl Plant {
         let mut limited = false;
         for (i, a) in self.act.iter_mut().enumerate() {
             let target = if cmd.enable { cmd.steps[i] } else { a.counter };
-            limited |= a.plan_cycle(t0, period, target, &self.stepper);
+            limited |= a.plan_cycle(t0, period, target, &self.stepper[i]);
         }
         self.limited = limited;
         let n = self.cfg.simulation.substeps_per_cycle.max(1);
@@ -296,9 +299,8 @@ impl Plant {
     }
 
     fn substep(&mut self, t: f64, dt: f64) -> Result<(), StaticsError> {
-        let p = self.stepper.miss_probability;
-        for a in self.act.iter_mut() {
-            a.advance_to(t, p, &mut self.rng_stepper);
+        for (a, p) in self.act.iter_mut().zip(&self.stepper) {
+            a.advance_to(t, p.miss_probability, &mut self.rng_stepper);
         }
         let output: [f64; 3] = std::array::from_fn(|i| self.act[i].output);
         if self.cfg.creep.enabled {

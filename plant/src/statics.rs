@@ -209,8 +209,8 @@ pub struct Equilibrium {
     pub zeta: [f64; 3],
     /// Link forces on the platform f_i, N.
     pub link_force: [Vec2; 3],
-    /// Axial link forces lambda_i = f_i . u_i (positive pulls the platform towards M_i... no:
-    /// along u_i = (P_i - M_i)/l_st, i.e. positive = link in compression), N.
+    /// Axial link forces lambda_i = f_i . u_i with u_i = (P_i - M_i)/l_st: the link pushes the
+    /// platform away from M_i when positive (compression), N.
     pub lambda: [f64; 3],
     /// Tendon moment T_i = m_i(l_C) minus the tip couples, N mm.
     pub tendon_moment: [f64; 3],

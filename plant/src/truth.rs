@@ -58,8 +58,8 @@ impl TruthModel {
         })
     }
 
-    /// Stateless equilibrium for tendon displacements given as motor output positions `q`
-    /// (steps, may be fractional) and tendon creep `creep_mm`, with the configured wrench.
+    /// Stateless equilibrium for motor output positions `q` (steps, may be fractional; no
+    /// backlash, creep or friction), with the configured wrench.
     pub fn solve_steps(&self, q: &[f64; 3]) -> Result<Equilibrium, StaticsError> {
         self.solve_loads(&Loads {
             phi_b: self.robot.bending_of_steps(q, &[0.0; 3]),
