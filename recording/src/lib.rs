@@ -360,6 +360,78 @@ impl Recording {
     }
 }
 
+impl Recording {
+    /// Writes the whole recording (metadata, other comments, the columns it has, unknown
+    /// columns with their cells as read) to a file.
+    pub fn write_path(&self, path: impl AsRef<Path>) -> Result<(), RecordingError> {
+        let path = path.as_ref();
+        let f = std::fs::File::create(path).map_err(|source| RecordingError::Io {
+            path: path.display().to_string(),
+            source,
+        })?;
+        self.write(std::io::BufWriter::new(f))
+    }
+
+    /// Writes the whole recording to any writer (see [`Recording::write_path`]).
+    pub fn write<W: Write>(&self, mut w: W) -> Result<(), RecordingError> {
+        for (k, v) in &self.metadata {
+            writeln!(w, "# {k} = {v}").map_err(io_err)?;
+        }
+        for c in &self.comments {
+            writeln!(w, "# {c}").map_err(io_err)?;
+        }
+        let known: Vec<usize> = KNOWN_COLUMNS
+            .iter()
+            .enumerate()
+            .filter(|(k, c)| *k < 4 || self.columns.iter().any(|x| x == *c))
+            .map(|(k, _)| k)
+            .collect();
+        let mut out = csv::WriterBuilder::new().from_writer(w);
+        let header: Vec<&str> = known
+            .iter()
+            .map(|&k| KNOWN_COLUMNS[k])
+            .chain(self.extra_columns.iter().map(String::as_str))
+            .collect();
+        out.write_record(&header).map_err(io_err)?;
+        for (n, row) in self.rows.iter().enumerate() {
+            let mut cells = known_cells(row, &known)
+                .map_err(|message| RecordingError::Write { row: n, message })?;
+            for i in 0..self.extra_columns.len() {
+                cells.push(row.extra.get(i).cloned().flatten().unwrap_or_default());
+            }
+            out.write_record(&cells).map_err(io_err)?;
+        }
+        out.flush().map_err(io_err)?;
+        Ok(())
+    }
+}
+
+/// The cells of the known columns `idx` of a row.
+fn known_cells(row: &Row, idx: &[usize]) -> Result<Vec<String>, String> {
+    let fmt = |name: &str, v: Option<f64>| -> Result<String, String> {
+        match v {
+            None => Ok(String::new()),
+            Some(x) if x.is_finite() => Ok(format!("{x}")),
+            Some(x) => Err(format!("{name} = {x} (write None instead)")),
+        }
+    };
+    let mut cells = Vec::with_capacity(idx.len());
+    for &k in idx {
+        let name = KNOWN_COLUMNS[k];
+        cells.push(match k {
+            0 => fmt(name, Some(row.t_s))?,
+            1..=3 => row.q[k - 1].to_string(),
+            4..=6 => fmt(name, row.pose[k - 4])?,
+            7..=12 => fmt(name, row.m[(k - 7) / 2][(k - 7) % 2])?,
+            13..=15 => fmt(name, row.planned[k - 13])?,
+            16 => row.pose_id.map_or(String::new(), |v| v.to_string()),
+            17 => row.rep.map_or(String::new(), |v| v.to_string()),
+            _ => row.settled.map_or(String::new(), |v| (v as u8).to_string()),
+        });
+    }
+    Ok(cells)
+}
+
 /// Writes a recording row by row, flushing each row.
 pub struct RecordingWriter<W: Write> {
     out: csv::Writer<W>,
@@ -470,6 +542,7 @@ impl<W: Write> RecordingWriter<W> {
                 return Err(bad(format!("t_s = {} after {p}: must increase", row.t_s)));
             }
         }
+        let mut cells = known_cells(row, &self.columns).map_err(bad)?;
         let fmt = |name: &str, v: Option<f64>| -> Result<String, RecordingError> {
             match v {
                 None => Ok(String::new()),
@@ -477,20 +550,6 @@ impl<W: Write> RecordingWriter<W> {
                 Some(x) => Err(bad(format!("{name} = {x} (write None instead)"))),
             }
         };
-        let mut cells: Vec<String> = Vec::with_capacity(self.columns.len() + self.n_extra);
-        for &k in &self.columns {
-            let name = KNOWN_COLUMNS[k];
-            cells.push(match k {
-                0 => format!("{}", row.t_s),
-                1..=3 => row.q[k - 1].to_string(),
-                4..=6 => fmt(name, row.pose[k - 4])?,
-                7..=12 => fmt(name, row.m[(k - 7) / 2][(k - 7) % 2])?,
-                13..=15 => fmt(name, row.planned[k - 13])?,
-                16 => row.pose_id.map_or(String::new(), |v| v.to_string()),
-                17 => row.rep.map_or(String::new(), |v| v.to_string()),
-                _ => row.settled.map_or(String::new(), |v| (v as u8).to_string()),
-            });
-        }
         for (i, v) in extra.iter().enumerate() {
             cells.push(fmt(&format!("extra column {}", i + 1), *v)?);
         }

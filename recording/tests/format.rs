@@ -125,3 +125,19 @@ fn writer_flushes_every_row() {
     drop(w);
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn whole_recording_round_trip_keeps_unknown_columns() {
+    let text = "# robot = lab-2\n# a free comment\n\
+                foo,q3,t_s,q1,q2,x_mm,settled,bar\n\
+                \"a,b\",176,0.000,176,176,1.5,1,\n\
+                c,177,0.020,176.0,176,,,7\n";
+    let rec = read(text).unwrap();
+    let mut buf = Vec::new();
+    rec.write(&mut buf).unwrap();
+    let back = read(std::str::from_utf8(&buf).unwrap()).unwrap();
+    assert_eq!(back.metadata, rec.metadata);
+    assert_eq!(back.comments, rec.comments);
+    assert_eq!(back.extra_columns, rec.extra_columns);
+    assert_eq!(back.rows, rec.rows);
+}
