@@ -3,7 +3,7 @@
 
 use crate::config::{PlantConfig, TrueMapKind};
 use pcr_robot::geometry::{add, norm, rot, signed_angle, sub, Vec2};
-use pcr_robot::{LegConfig, RobotConfig};
+use pcr_robot::{LegConfig, RobotConfig, WorkingMode};
 
 /// True geometry of one leg (mm, rad).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -142,6 +142,12 @@ impl TrueRobot {
 /// Bending of leg `leg` whose loop closes at `pose` in the constant-curvature model with the
 /// nominal geometry, on the branch gamma < 0 (the prototype's working mode). None if no root.
 pub fn cc_ik_bending(leg: &LegConfig, pose: [f64; 3]) -> Option<f64> {
+    cc_ik_bending_in_mode(leg, pose, WorkingMode::Negative)
+}
+
+/// As [`cc_ik_bending`] on the branch of the given working mode (sign of gamma); the root of
+/// smallest |bending| if several.
+pub fn cc_ik_bending_in_mode(leg: &LegConfig, pose: [f64; 3], mode: WorkingMode) -> Option<f64> {
     let g = LegGeometry::from_leg(leg);
     let p = add([pose[0], pose[1]], rot(pose[2], g.p_e));
     let h = |phi: f64| {
@@ -173,7 +179,7 @@ pub fn cc_ik_bending(leg: &LegConfig, pose: [f64; 3]) -> Option<f64> {
                 }
             }
             let r = 0.5 * (x0 + x1);
-            if gamma(r) < 0.0 && best.is_none_or(|b: f64| r.abs() < b.abs()) {
+            if gamma(r) * mode.sign() > 0.0 && best.is_none_or(|b: f64| r.abs() < b.abs()) {
                 best = Some(r);
             }
         }
@@ -183,12 +189,12 @@ pub fn cc_ik_bending(leg: &LegConfig, pose: [f64; 3]) -> Option<f64> {
     best
 }
 
-/// Home motor positions: the nominal CC IK of pose (0, 0, 0) with the linear map
-/// kappa = dl / (a l_C), rounded to whole steps.
+/// Home motor positions: the nominal CC IK of pose (0, 0, 0) in the robot's working mode with
+/// the linear map kappa = dl / (a l_C), rounded to whole steps (0 if a leg has no root).
 pub fn home_steps(robot: &RobotConfig) -> [i32; 3] {
     std::array::from_fn(|i| {
         let leg = &robot.legs[i];
-        let phi = cc_ik_bending(leg, [0.0, 0.0, 0.0]).unwrap_or(0.0);
+        let phi = cc_ik_bending_in_mode(leg, [0.0, 0.0, 0.0], robot.working_mode[i]).unwrap_or(0.0);
         let dl = phi * leg.actuation.tendon_offset_mm;
         (dl / leg.actuation.mm_per_step()).round() as i32
     })
@@ -211,6 +217,12 @@ mod tests {
             assert!((phi / leg.l_c_mm - 0.00307872).abs() < 1e-8);
         }
         assert_eq!(home_steps(&robot), [176, 176, 176]);
+        // The other branch at home: 160.7 deg bending (geometry.md).
+        let phi = cc_ik_bending_in_mode(&robot.legs[0], [0.0; 3], WorkingMode::Positive).unwrap();
+        assert!(
+            (phi / robot.legs[0].l_c_mm - 0.0224255).abs() < 1e-7,
+            "{phi}"
+        );
     }
 
     #[test]
