@@ -61,6 +61,9 @@ enum PlantCommand {
         /// for registration) instead of the robot base frame.
         #[arg(long)]
         capture_frame: bool,
+        /// Seed of the random effects (overrides the plant configuration's `seed`).
+        #[arg(long)]
+        seed: Option<u64>,
     },
     /// Draw the robot's shape (segments, extensions, links, platform) as SVG.
     Draw {
@@ -91,8 +94,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             input,
             output,
             capture_frame,
+            seed,
         } => {
-            let (robot, plant) = load(&common)?;
+            let (robot, mut plant) = load(&common)?;
+            if let Some(seed) = seed {
+                plant.seed = seed;
+            }
             run_series(&robot, &plant, &common, &input, &output, capture_frame)
         }
         PlantCommand::Draw { common, q, output } => {
