@@ -484,3 +484,27 @@ fn joint_springs_signature() {
         "{turn_sprung} vs {turn_free}"
     );
 }
+
+/// The buckling criterion: a straight segment whose end rotation is held by the tendons
+/// (clamped-guided column) reaches its conjugate point at the Euler load pi^2 EI / L^2, where
+/// d theta(l_C) / d m(0) changes sign; an equilibrium with that sign is reported as buckling of
+/// its leg.
+#[test]
+fn buckling_criterion_at_the_euler_load() {
+    let (l, ei) = (125.0, 6.5e4);
+    let p = SegmentParams {
+        theta0: std::f64::consts::FRAC_PI_2,
+        length: l,
+        ei,
+        steps: 100,
+    };
+    let euler = std::f64::consts::PI.powi(2) * ei / (l * l);
+    let below = integrate(&p, 0.0, [0.0, -0.99 * euler]).jac[2][0];
+    let above = integrate(&p, 0.0, [0.0, -1.01 * euler]).jac[2][0];
+    assert!(below > 0.0 && above < 0.0, "{below} {above}");
+    let t = ideal();
+    let (_, mut eq) = exact_home(&t);
+    eq.jacobi[1] = above;
+    let e = t.statics.check(&eq).unwrap_err();
+    assert!(matches!(e, StaticsError::Buckling { leg: 2, .. }), "{e}");
+}
