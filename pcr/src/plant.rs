@@ -179,7 +179,8 @@ impl Table {
 }
 
 fn fmt(v: f64) -> String {
-    format!("{v:.6}")
+    // Rounded first so that tiny negative values do not print as "-0.000000".
+    format!("{:.6}", (v * 1e6).round() / 1e6 + 0.0)
 }
 
 fn pose(
