@@ -64,6 +64,10 @@ enum PlantCommand {
         /// Seed of the random effects (overrides the plant configuration's `seed`).
         #[arg(long)]
         seed: Option<u64>,
+        /// Stop at the first setpoint the plant cannot follow (default: the plant holds its
+        /// position, the row's `fault` column is 1 and the run goes on).
+        #[arg(long)]
+        stop_on_fault: bool,
     },
     /// Draw the robot's shape (segments, extensions, links, platform) as SVG.
     Draw {
@@ -95,12 +99,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             output,
             capture_frame,
             seed,
+            stop_on_fault,
         } => {
             let (robot, mut plant) = load(&common)?;
             if let Some(seed) = seed {
                 plant.seed = seed;
             }
-            run_series(&robot, &plant, &common, &input, &output, capture_frame)
+            run_series(
+                &robot,
+                &plant,
+                &common,
+                &input,
+                &output,
+                capture_frame,
+                stop_on_fault,
+            )
         }
         PlantCommand::Draw { common, q, output } => {
             let (robot, plant) = load(&common)?;
@@ -243,7 +256,7 @@ fn equilibrium_cells(eq: &Equilibrium) -> Vec<String> {
 }
 
 /// Extra columns of `pcr plant run`: raw capture-frame values and the true state.
-const RUN_EXTRA: [&str; 36] = [
+const RUN_EXTRA: [&str; 37] = [
     "xc_mm",
     "yc_mm",
     "phic_deg",
@@ -280,6 +293,7 @@ const RUN_EXTRA: [&str; 36] = [
     "f1_n",
     "f2_n",
     "f3_n",
+    "fault",
 ];
 
 fn run_series(
@@ -289,6 +303,7 @@ fn run_series(
     input: &Path,
     output: &Path,
     capture_frame: bool,
+    stop_on_fault: bool,
 ) -> anyhow::Result<()> {
     let mut plant = Plant::new(robot, cfg).context("cannot build the plant")?;
     let table = Table::read(input)?;
@@ -354,6 +369,7 @@ fn run_series(
         .with_context(|| format!("cannot create {}", output.display()))?;
     let frame = plant.capture_model().frame;
     let mut last_meas = None;
+    let mut faults = 0usize;
     for (k, &(t, q, line)) in setpoints.iter().enumerate() {
         // Catch up to t (idle if the setpoints have a gap), then record what is known at t.
         plant
@@ -405,20 +421,31 @@ fn run_series(
         extra.extend(s.tendon_mm.map(Some));
         extra.extend(s.bending.map(|b| Some(b.to_degrees())));
         extra.extend(s.eq.lambda.map(Some));
+        let drive = plant.read(t, cfg.simulation.cycle_s)?;
+        extra.push(Some(f64::from(u8::from(drive.fault))));
         w.write_row(&row, &extra)?;
         let period = setpoints
             .get(k + 1)
             .map_or(cfg.simulation.cycle_s, |n| n.0 - t);
-        plant
-            .write(
-                t,
-                period,
-                &MotorCommand {
-                    steps: q,
-                    enable: true,
-                },
-            )
-            .with_context(|| format!("{}: line {line}: setpoint {q:?}", table.origin))?;
+        let cmd = MotorCommand {
+            steps: q,
+            enable: true,
+        };
+        if let Err(e) = plant.write(t, period, &cmd) {
+            let what = format!("{}: line {line}: setpoint {q:?}: {e}", table.origin);
+            if stop_on_fault {
+                bail!("{what}");
+            }
+            // The plant holds its position and reports a fault, as the real drive would.
+            tracing::warn!("{what}");
+            faults += 1;
+        }
+    }
+    if faults > 0 {
+        tracing::warn!(
+            "{faults} setpoint(s) of {} could not be followed (column `fault`)",
+            table.origin
+        );
     }
     Ok(())
 }
@@ -614,7 +641,7 @@ mod tests {
             plant: None,
             robot: None,
         };
-        run_series(&robot, &cfg, &common, &input, &output, false).unwrap();
+        run_series(&robot, &cfg, &common, &input, &output, false, true).unwrap();
         let rec = pcr_recording::Recording::read_path(&output).unwrap();
         assert_eq!(rec.rows.len(), 40);
         let truth = TruthModel::new(&robot, &cfg).unwrap();

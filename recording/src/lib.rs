@@ -406,12 +406,25 @@ impl Recording {
     }
 }
 
+/// A finite number as written: the shortest text that reads back to the same value, in
+/// exponent form for very small or very large magnitudes (e.g. `1.5e-27`, never `NaN`).
+pub fn number(x: f64) -> String {
+    let a = x.abs();
+    if x == 0.0 {
+        "0".into()
+    } else if (1e-6..1e15).contains(&a) {
+        format!("{x}")
+    } else {
+        format!("{x:e}")
+    }
+}
+
 /// The cells of the known columns `idx` of a row.
 fn known_cells(row: &Row, idx: &[usize]) -> Result<Vec<String>, String> {
     let fmt = |name: &str, v: Option<f64>| -> Result<String, String> {
         match v {
             None => Ok(String::new()),
-            Some(x) if x.is_finite() => Ok(format!("{x}")),
+            Some(x) if x.is_finite() => Ok(number(x)),
             Some(x) => Err(format!("{name} = {x} (write None instead)")),
         }
     };
@@ -419,7 +432,7 @@ fn known_cells(row: &Row, idx: &[usize]) -> Result<Vec<String>, String> {
     for &k in idx {
         let name = KNOWN_COLUMNS[k];
         cells.push(match k {
-            0 => fmt(name, Some(row.t_s))?,
+            0 => number(row.t_s),
             1..=3 => row.q[k - 1].to_string(),
             4..=6 => fmt(name, row.pose[k - 4])?,
             7..=12 => fmt(name, row.m[(k - 7) / 2][(k - 7) % 2])?,
@@ -546,7 +559,7 @@ impl<W: Write> RecordingWriter<W> {
         let fmt = |name: &str, v: Option<f64>| -> Result<String, RecordingError> {
             match v {
                 None => Ok(String::new()),
-                Some(x) if x.is_finite() => Ok(format!("{x}")),
+                Some(x) if x.is_finite() => Ok(number(x)),
                 Some(x) => Err(bad(format!("{name} = {x} (write None instead)"))),
             }
         };

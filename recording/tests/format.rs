@@ -141,3 +141,23 @@ fn whole_recording_round_trip_keeps_unknown_columns() {
     assert_eq!(back.extra_columns, rec.extra_columns);
     assert_eq!(back.rows, rec.rows);
 }
+
+#[test]
+fn numbers_are_written_compactly_and_read_back_exactly() {
+    for x in [
+        0.0,
+        -0.0,
+        1.5,
+        -209.46613071,
+        1e-27,
+        -3.3e-31,
+        2e16,
+        0.02,
+        1e-6,
+        123456.789,
+    ] {
+        let t = pcr_recording::number(x);
+        assert!(t.len() < 26, "{t}");
+        assert_eq!(t.parse::<f64>().unwrap(), x, "{t}");
+    }
+}
