@@ -255,6 +255,9 @@ fn equilibrium_cells(eq: &Equilibrium) -> Vec<String> {
     c
 }
 
+/// Recording columns copied from the setpoints file when present.
+const PASS_THROUGH: [&str; 6] = ["xp_mm", "yp_mm", "phip_deg", "pose_id", "rep", "settled"];
+
 /// Extra columns of `pcr plant run`: raw capture-frame values and the true state.
 const RUN_EXTRA: [&str; 37] = [
     "xc_mm",
@@ -325,7 +328,7 @@ fn run_series(
             }
             q[k] = v as i32;
         }
-        if let Some(&(tp, _, _)) = setpoints.last() {
+        if let Some(&(tp, _, _, _)) = setpoints.last() {
             if t <= tp {
                 bail!(
                     "{}: line {}, column `t_s`: {t} does not increase (previous {tp})",
@@ -336,7 +339,34 @@ fn run_series(
         } else if t < 0.0 {
             bail!("{}: line {}: t_s must be >= 0", table.origin, row.0);
         }
-        setpoints.push((t, q, row.0));
+        // Planned pose and experiment bookkeeping, copied through when the input has them.
+        let mut base = Row::new(t, q);
+        for (k, name) in PASS_THROUGH.iter().enumerate() {
+            let Some(c) = table.header.iter().position(|h| h == name) else {
+                continue;
+            };
+            if row.1[c].is_empty() {
+                continue;
+            }
+            let v = table.num(row, c)?;
+            let whole = || -> anyhow::Result<u64> {
+                if v.fract() != 0.0 || v < 0.0 || (k == 5 && v > 1.0) {
+                    bail!(
+                        "{}: line {}, column `{name}`: {v} is not a valid value",
+                        table.origin,
+                        row.0
+                    );
+                }
+                Ok(v as u64)
+            };
+            match k {
+                0..=2 => base.planned[k] = Some(v),
+                3 => base.pose_id = Some(whole()?),
+                4 => base.rep = Some(whole()?),
+                _ => base.settled = Some(whole()? == 1),
+            }
+        }
+        setpoints.push((t, q, row.0, base));
     }
     let mut meta = vec![
         ("source".to_string(), "pcr plant run".to_string()),
@@ -362,15 +392,21 @@ fn run_series(
     ];
     meta.push(("setpoints".to_string(), input.display().to_string()));
     meta.push(("created".to_string(), utc_now()));
-    let known = [
+    let mut known = vec![
         "x_mm", "y_mm", "phi_deg", "m1x_mm", "m1y_mm", "m2x_mm", "m2y_mm", "m3x_mm", "m3y_mm",
     ];
+    known.extend(
+        PASS_THROUGH
+            .iter()
+            .filter(|c| table.header.iter().any(|h| h == *c)),
+    );
     let mut w = RecordingWriter::create(output, &meta, &known, &RUN_EXTRA)
         .with_context(|| format!("cannot create {}", output.display()))?;
     let frame = plant.capture_model().frame;
     let mut last_meas = None;
     let mut faults = 0usize;
-    for (k, &(t, q, line)) in setpoints.iter().enumerate() {
+    for (k, (t, q, line, base)) in setpoints.iter().enumerate() {
+        let (t, q, line) = (*t, *q, *line);
         // Catch up to t (idle if the setpoints have a gap), then record what is known at t.
         plant
             .idle_until(t)
@@ -379,7 +415,7 @@ fn run_series(
             last_meas = Some(m);
         }
         let s = plant.true_state().clone();
-        let mut row = Row::new(t, q);
+        let mut row = base.clone();
         if let Some(m) = last_meas {
             let m = if capture_frame {
                 m
@@ -630,10 +666,18 @@ mod tests {
         let robot = RobotConfig::nominal();
         let cfg = PlantConfig::ideal();
         let input = tmp("setpoints.csv");
-        let mut text = String::from("t_s,q1,q2,q3\n");
+        let mut text = String::from("t_s,q1,q2,q3,pose_id,settled\n");
         for k in 0..40 {
             let q = [176 + k, 176 - k / 2, 176 + k / 3];
-            text += &format!("{:.2},{},{},{}\n", k as f64 * 0.02, q[0], q[1], q[2]);
+            let settled = if k % 10 == 9 { "1" } else { "" };
+            text += &format!(
+                "{:.2},{},{},{},{},{settled}\n",
+                k as f64 * 0.02,
+                q[0],
+                q[1],
+                q[2],
+                k / 10
+            );
         }
         std::fs::write(&input, text).unwrap();
         let output = tmp("rec.csv");
@@ -644,6 +688,9 @@ mod tests {
         run_series(&robot, &cfg, &common, &input, &output, false, true).unwrap();
         let rec = pcr_recording::Recording::read_path(&output).unwrap();
         assert_eq!(rec.rows.len(), 40);
+        assert_eq!(rec.rows[19].pose_id, Some(1));
+        assert_eq!(rec.rows[19].settled, Some(true));
+        assert_eq!(rec.rows[18].settled, None);
         let truth = TruthModel::new(&robot, &cfg).unwrap();
         let ix = rec.extra_index("x_true_mm").unwrap();
         for k in 1..rec.rows.len() {
