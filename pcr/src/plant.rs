@@ -79,6 +79,10 @@ enum PlantCommand {
         /// SVG file to write.
         #[arg(long)]
         output: PathBuf,
+        /// Overlay, in grey, the nominal constant-curvature arcs of the same motor positions
+        /// (nominal geometry, linear tendon map): the model error the plant holds.
+        #[arg(long)]
+        cc: bool,
     },
 }
 
@@ -115,9 +119,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 stop_on_fault,
             )
         }
-        PlantCommand::Draw { common, q, output } => {
+        PlantCommand::Draw {
+            common,
+            q,
+            output,
+            cc,
+        } => {
             let (robot, plant) = load(&common)?;
-            draw(&robot, &plant, q, &output)
+            draw(&robot, &plant, q, &output, cc)
         }
     }
 }
@@ -515,6 +524,7 @@ fn draw(
     cfg: &PlantConfig,
     q: Option<String>,
     output: &Path,
+    cc: bool,
 ) -> anyhow::Result<()> {
     use plotters::prelude::*;
     let truth = TruthModel::new(robot, cfg).context("the plant has no home equilibrium")?;
@@ -599,6 +609,35 @@ fn draw(
                 4,
                 ShapeStyle::from(&BLACK).stroke_width(1),
             )))?;
+        }
+    }
+    if cc {
+        // Nominal CC arcs: geometry.md eq. 4 with kappa = dl / (a l_C).
+        for (i, leg) in robot.legs.iter().enumerate() {
+            let g = pcr_plant::model::LegGeometry::from_leg(leg);
+            let phi = q[i] * leg.actuation.mm_per_step() / leg.actuation.tendon_offset_mm;
+            let pts: Vec<(f64, f64)> = std::iter::once((g.base[0], g.base[1]))
+                .chain((1..=40).map(|k| {
+                    let f = k as f64 / 40.0;
+                    let part = pcr_plant::model::LegGeometry {
+                        l_c: g.l_c * f,
+                        l_ce: 0.0,
+                        ..g
+                    };
+                    let (p, _) = part.arc_tip(phi * f);
+                    (p[0], p[1])
+                }))
+                .collect();
+            let (m, _) = g.arc_tip(phi);
+            let tip = *pts.last().expect("41 points");
+            chart.draw_series(LineSeries::new(
+                pts,
+                RGBColor(150, 150, 150).stroke_width(1),
+            ))?;
+            chart.draw_series(LineSeries::new(
+                vec![tip, (m[0], m[1])],
+                RGBColor(150, 150, 150).stroke_width(1),
+            ))?;
         }
     }
     let tri: Vec<(f64, f64)> =
