@@ -1,0 +1,494 @@
+//! The time-stepped plant: motor setpoints every control cycle, sub-stepped statics with
+//! history (backlash, friction, creep), the true state and motion-capture samples. Implements
+//! [`pcr_driver::Driver`].
+
+use crate::actuator::{Actuator, StepperParams};
+use crate::capture::{CaptureModel, Measurement};
+use crate::config::{PlantConfig, PlantConfigError};
+use crate::segment::{self, SegmentParams};
+use crate::statics::{
+    joint_anchor_after, support_anchor_after, Equilibrium, FrictionAnchors, FrictionParams,
+    JacobianCache, Loads, StaticsError,
+};
+use crate::truth::TruthModel;
+use pcr_driver::{Driver, DriverError, DriverState, MotorCommand};
+use pcr_robot::geometry::{add, Vec2};
+use pcr_robot::RobotConfig;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use std::collections::VecDeque;
+
+/// Why the plant could not be built or stepped.
+#[derive(Debug, thiserror::Error)]
+pub enum PlantError {
+    /// Bad configuration.
+    #[error(transparent)]
+    Config(#[from] PlantConfigError),
+    /// No equilibrium (the plant holds its last state).
+    #[error(transparent)]
+    Statics(#[from] StaticsError),
+}
+
+/// The true state of the plant at one instant (robot base frame).
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrueState {
+    /// Simulated time, s.
+    pub t_s: f64,
+    /// Firmware step counters (what the drive reports), steps.
+    pub counter: [i32; 3],
+    /// Motor rotor positions (counter minus missed steps), steps.
+    pub motor: [i32; 3],
+    /// Gear output positions (after backlash), steps.
+    pub output: [f64; 3],
+    /// Tendon creep elongation, mm.
+    pub creep_mm: [f64; 3],
+    /// Effective tendon displacements dl_i = output * mm/step - creep, mm.
+    pub tendon_mm: [f64; 3],
+    /// Bending phi_b,i from the true tendon map, rad.
+    pub bending: [f64; 3],
+    /// The equilibrium (pose, M_i, P_i, forces, ...).
+    pub eq: Equilibrium,
+}
+
+/// The simulated robot.
+pub struct Plant {
+    truth: TruthModel,
+    cfg: PlantConfig,
+    /// Stepper parameters per leg.
+    stepper: [StepperParams; 3],
+    friction: Option<FrictionParams>,
+    capture: CaptureModel,
+    rng_stepper: ChaCha8Rng,
+    rng_capture: ChaCha8Rng,
+    act: [Actuator; 3],
+    creep: [f64; 3],
+    anchors: FrictionAnchors,
+    state: TrueState,
+    /// True states at the sub-step times (for latency and sampling).
+    history: VecDeque<(f64, [f64; 3], [Vec2; 3])>,
+    next_sample: u64,
+    measurements: VecDeque<Measurement>,
+    last_drained: Option<Measurement>,
+    enabled: bool,
+    limited: bool,
+    fault: bool,
+    target: [i32; 3],
+    name: String,
+    fallbacks: u64,
+    jac_cache: Option<JacobianCache>,
+    /// Sign of det(Jacobian) of the statics at home (with this plant's friction): stable.
+    stable_sign: f64,
+}
+
+impl Plant {
+    /// A plant at rest at its home motor positions at t = 0.
+    pub fn new(robot: &RobotConfig, cfg: &PlantConfig) -> Result<Plant, PlantError> {
+        cfg.validate("plant configuration")?;
+        let truth = TruthModel::new(robot, cfg)?;
+        let home = truth.robot.home_steps;
+        let s = &cfg.stepper;
+        let stepper = std::array::from_fn(|i| StepperParams {
+            max_rate: s
+                .rate_limit
+                .then_some(robot.legs[i].actuation.max_step_rate),
+            pull_out_rate: s.missed_steps.then_some(s.pull_out_rate),
+            miss_probability: if s.missed_steps {
+                s.miss_probability
+            } else {
+                0.0
+            },
+        });
+        let f = &cfg.friction;
+        let friction = (f.joints || f.supports).then_some(FrictionParams {
+            joint_torque: if f.joints { f.joint_torque_n_mm } else { 0.0 },
+            joint_stiffness: f.joint_stick_stiffness_n_mm_per_rad,
+            support_force: if f.supports { f.support_force_n } else { 0.0 },
+            support_stiffness: f.support_stick_stiffness_n_per_mm,
+        });
+        let act = std::array::from_fn(|i| {
+            Actuator::new(home[i], if s.backlash { s.backlash_steps[i] } else { 0.0 })
+        });
+        let output = home.map(f64::from);
+        let loads = Loads {
+            phi_b: truth.robot.bending_of_steps(&output, &[0.0; 3]),
+            wrench: truth.wrench,
+            friction: None,
+        };
+        let eq = truth.solve_loads(&loads)?;
+        let anchors = FrictionAnchors {
+            gamma: eq.gamma,
+            zeta: eq.zeta,
+            m: eq.m,
+            p: eq.p,
+        };
+        let state = TrueState {
+            t_s: 0.0,
+            counter: home,
+            motor: home,
+            output,
+            creep_mm: [0.0; 3],
+            tendon_mm: std::array::from_fn(|i| output[i] * truth.robot.mm_per_step[i]),
+            bending: loads.phi_b,
+            eq,
+        };
+        let home_loads = Loads {
+            friction: friction.map(|f| (f, anchors)),
+            ..loads
+        };
+        let stable_sign = truth
+            .statics
+            .jacobian_at(&home_loads, &state.eq.z)
+            .map_or(1.0, |c| c.det_sign);
+        let mut history = VecDeque::new();
+        history.push_back((0.0, state.eq.pose, state.eq.m));
+        let mut plant = Plant {
+            stepper,
+            friction,
+            capture: CaptureModel::new(&cfg.capture),
+            rng_stepper: ChaCha8Rng::seed_from_u64(cfg.seed),
+            rng_capture: ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x9e37_79b9_7f4a_7c15),
+            act,
+            creep: [0.0; 3],
+            anchors,
+            state,
+            history,
+            next_sample: 0,
+            measurements: VecDeque::new(),
+            last_drained: None,
+            enabled: true,
+            limited: false,
+            fault: false,
+            target: home,
+            name: "plant".into(),
+            fallbacks: 0,
+            jac_cache: None,
+            stable_sign,
+            truth,
+            cfg: cfg.clone(),
+        };
+        plant.sample_until(0.0);
+        Ok(plant)
+    }
+
+    /// The static truth model behind the plant.
+    pub fn truth(&self) -> &TruthModel {
+        &self.truth
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &PlantConfig {
+        &self.cfg
+    }
+
+    /// The capture model (frame, noise, latency, rate).
+    pub fn capture_model(&self) -> &CaptureModel {
+        &self.capture
+    }
+
+    /// How many sub-steps needed the continuation fallback (warm Newton failed).
+    pub fn fallbacks(&self) -> u64 {
+        self.fallbacks
+    }
+
+    /// Simulated time, s.
+    pub fn time(&self) -> f64 {
+        self.state.t_s
+    }
+
+    /// The true state now.
+    pub fn true_state(&self) -> &TrueState {
+        &self.state
+    }
+
+    /// Home motor positions, steps.
+    pub fn home_steps(&self) -> [i32; 3] {
+        self.truth.robot.home_steps
+    }
+
+    /// Centre lines of the three segments now (base frame, mm), `segment_steps + 1` points each.
+    pub fn segment_shapes(&self) -> [Vec<Vec2>; 3] {
+        segment_shapes(&self.truth, &self.state.eq)
+    }
+
+    /// Capture samples reported since the last call (capture frame), oldest first.
+    pub fn drain_measurements(&mut self) -> Vec<Measurement> {
+        let out: Vec<Measurement> = self.measurements.drain(..).collect();
+        if let Some(m) = out.last() {
+            self.last_drained = Some(*m);
+        }
+        out
+    }
+
+    /// The latest capture sample reported up to now (capture frame), without consuming it.
+    pub fn latest_measurement(&self) -> Option<Measurement> {
+        self.measurements.back().copied().or(self.last_drained)
+    }
+
+    /// Runs one control cycle of length `period` s towards the setpoint `cmd`.
+    /// On a failed static solve the motion is rolled back, the drive holds its position for the
+    /// cycle, reports `fault` and the error is returned.
+    pub fn step_cycle(&mut self, period: f64, cmd: &MotorCommand) -> Result<(), PlantError> {
+        self.enabled = cmd.enable;
+        self.target = cmd.steps;
+        match self.run_cycle(period, cmd) {
+            Ok(()) => {
+                self.fault = false;
+                Ok(())
+            }
+            Err(e) => {
+                // The drive holds its position for the cycle and reports a fault.
+                self.fault = true;
+                let hold = MotorCommand {
+                    steps: self.state.counter,
+                    enable: cmd.enable,
+                };
+                self.run_cycle(period, &hold)?;
+                Err(e.into())
+            }
+        }
+    }
+
+    /// One cycle; on a failed solve everything is rolled back to the cycle start.
+    fn run_cycle(&mut self, period: f64, cmd: &MotorCommand) -> Result<(), StaticsError> {
+        let t0 = self.state.t_s;
+        let backup = (
+            self.act.clone(),
+            self.creep,
+            self.anchors,
+            self.state.clone(),
+        );
+        let marks = (
+            self.history.len(),
+            self.measurements.len(),
+            self.next_sample,
+        );
+        let mut limited = false;
+        for (i, a) in self.act.iter_mut().enumerate() {
+            let target = if cmd.enable { cmd.steps[i] } else { a.counter };
+            limited |= a.plan_cycle(t0, period, target, &self.stepper[i]);
+        }
+        self.limited = limited;
+        let n = self.cfg.simulation.substeps_per_cycle.max(1);
+        for k in 1..=n {
+            let t = t0 + period * k as f64 / n as f64;
+            if let Err(e) = self.substep(t, period / n as f64) {
+                (self.act, self.creep, self.anchors, self.state) = backup;
+                self.history.truncate(marks.0.min(self.history.len()));
+                self.measurements
+                    .truncate(marks.1.min(self.measurements.len()));
+                self.next_sample = marks.2;
+                self.jac_cache = None;
+                return Err(e);
+            }
+        }
+        Ok(())
+    }
+
+    /// Lets time pass without new steps until `t` (whole sub-steps of the cycle length).
+    pub fn idle_until(&mut self, t: f64) -> Result<(), PlantError> {
+        let period = self.cfg.simulation.cycle_s;
+        while self.state.t_s + 1e-9 < t {
+            let dt = (t - self.state.t_s).min(period);
+            let cmd = MotorCommand {
+                steps: self.state.counter,
+                enable: self.enabled,
+            };
+            self.run_cycle(dt, &cmd)?;
+        }
+        Ok(())
+    }
+
+    fn substep(&mut self, t: f64, dt: f64) -> Result<(), StaticsError> {
+        for (a, p) in self.act.iter_mut().zip(&self.stepper) {
+            a.advance_to(t, p.miss_probability, &mut self.rng_stepper);
+        }
+        let output: [f64; 3] = std::array::from_fn(|i| self.act[i].output);
+        if self.cfg.creep.enabled {
+            let c = &self.cfg.creep;
+            let w = 1.0 - (-dt / c.time_constant_s).exp();
+            for i in 0..3 {
+                let tension = self.state.eq.tendon_moment[i] / self.truth.robot.tendon_offset[i];
+                let target = -c.compliance_mm_per_n * tension;
+                self.creep[i] += (target - self.creep[i]) * w;
+            }
+        }
+        let bending = self.truth.robot.bending_of_steps(&output, &self.creep);
+        let loads = Loads {
+            phi_b: bending,
+            wrench: self.truth.wrench,
+            friction: self.friction.map(|f| (f, self.anchors)),
+        };
+        // Unchanged bending: the same equilibrium (a slipped friction anchor keeps its force).
+        let unchanged = bending == self.state.bending;
+        let eq = if unchanged {
+            self.state.eq.clone()
+        } else {
+            let prev = &self.state.eq;
+            // A warm solve that lands far away has jumped to another branch (snap-through):
+            // follow the path in small steps instead, which fails at a limit point.
+            let jumped = |eq: &Equilibrium| {
+                (eq.pose[0] - prev.pose[0]).hypot(eq.pose[1] - prev.pose[1]) > MAX_JUMP_MM
+                    || (eq.pose[2] - prev.pose[2]).abs() > MAX_JUMP_RAD
+            };
+            let warm = self
+                .truth
+                .statics
+                .solve_warm_cached(&loads, &prev.z, &mut self.jac_cache)
+                .ok()
+                .filter(|eq| !jumped(eq));
+            let eq = match warm {
+                Some(eq) => eq,
+                None => {
+                    self.fallbacks += 1;
+                    let mut from = loads;
+                    from.phi_b = self.state.bending;
+                    self.truth.statics.solve_path(&from, prev, &loads)?
+                }
+            };
+            // Stability: the tangent stiffness keeps the sign it has at home. The fresh
+            // Jacobian also serves the next warm solve.
+            let fresh = self.truth.statics.jacobian_at(&loads, &eq.z);
+            match &fresh {
+                Some(c) if c.det_sign == self.stable_sign => {}
+                _ => return Err(StaticsError::Unstable),
+            }
+            self.jac_cache = fresh;
+            eq
+        };
+        if eq.det_a.signum() != self.state.eq.det_a.signum() {
+            return Err(StaticsError::AssemblyMode {
+                from: self.state.eq.det_a,
+                to: eq.det_a,
+            });
+        }
+        if let Some(f) = self.friction {
+            self.update_anchors(&f, &eq);
+        }
+        self.state = TrueState {
+            t_s: t,
+            counter: std::array::from_fn(|i| self.act[i].counter),
+            motor: std::array::from_fn(|i| self.act[i].motor),
+            output,
+            creep_mm: self.creep,
+            tendon_mm: std::array::from_fn(|i| {
+                output[i] * self.truth.robot.mm_per_step[i] - self.creep[i]
+            }),
+            bending,
+            eq,
+        };
+        self.history
+            .push_back((t, self.state.eq.pose, self.state.eq.m));
+        self.sample_until(t);
+        Ok(())
+    }
+
+    fn update_anchors(&mut self, f: &FrictionParams, eq: &Equilibrium) {
+        let a = &mut self.anchors;
+        for i in 0..3 {
+            if f.joint_torque > 0.0 {
+                let (k, l) = (f.joint_stiffness, f.joint_torque);
+                a.gamma[i] = joint_anchor_after(k, l, eq.gamma[i], a.gamma[i]);
+                a.zeta[i] = joint_anchor_after(k, l, eq.zeta[i], a.zeta[i]);
+            }
+            if f.support_force > 0.0 {
+                let (k, l) = (f.support_stiffness, f.support_force);
+                a.m[i] = support_anchor_after(k, l, eq.m[i], a.m[i]);
+                a.p[i] = support_anchor_after(k, l, eq.p[i], a.p[i]);
+            }
+        }
+    }
+
+    /// Emits the capture samples due up to `t` from the history (linear interpolation).
+    fn sample_until(&mut self, t: f64) {
+        let period = self.capture.period;
+        loop {
+            let ts = self.next_sample as f64 * period;
+            if ts > t + 1e-9 {
+                break;
+            }
+            let (pose, m) = self.history_at(ts - self.capture.latency);
+            let meas = self.capture.measure(ts, pose, m, &mut self.rng_capture);
+            self.measurements.push_back(meas);
+            self.next_sample += 1;
+        }
+        // Keep enough history for the latency.
+        let keep_from = t - self.capture.latency - 2.0 * period - self.cfg.simulation.cycle_s;
+        while self.history.len() > 2 && self.history[1].0 < keep_from {
+            self.history.pop_front();
+        }
+    }
+
+    fn history_at(&self, t: f64) -> ([f64; 3], [Vec2; 3]) {
+        let h = &self.history;
+        if t <= h[0].0 {
+            return (h[0].1, h[0].2);
+        }
+        for w in 1..h.len() {
+            let (t1, p1, m1) = &h[w];
+            if *t1 >= t - 1e-12 {
+                let (t0, p0, m0) = &h[w - 1];
+                let s = if t1 > t0 { (t - t0) / (t1 - t0) } else { 1.0 };
+                let lerp = |a: f64, b: f64| a + s * (b - a);
+                let pose = std::array::from_fn(|k| lerp(p0[k], p1[k]));
+                let m =
+                    std::array::from_fn(|i| [lerp(m0[i][0], m1[i][0]), lerp(m0[i][1], m1[i][1])]);
+                return (pose, m);
+            }
+        }
+        let last = h.back().expect("history is never empty");
+        (last.1, last.2)
+    }
+}
+
+/// Largest platform translation in one sub-step of a warm solve before it counts as a jump to
+/// another branch, mm.
+const MAX_JUMP_MM: f64 = 3.0;
+/// Largest platform rotation in one sub-step of a warm solve, rad.
+const MAX_JUMP_RAD: f64 = 0.03;
+
+/// Centre lines of the three segments of an equilibrium (base frame, mm).
+pub fn segment_shapes(truth: &TruthModel, eq: &Equilibrium) -> [Vec<Vec2>; 3] {
+    std::array::from_fn(|i| {
+        let g = &truth.statics.legs[i];
+        let p = SegmentParams {
+            theta0: g.theta0,
+            length: g.l_c,
+            ei: truth.statics.ei,
+            steps: truth.statics.steps,
+        };
+        segment::shape(&p, eq.z[9 + i], eq.tip_load[i])
+            .into_iter()
+            .map(|(q, _)| add(g.base, q))
+            .collect()
+    })
+}
+
+impl Driver for Plant {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn write(&mut self, time_s: f64, period_s: f64, cmd: &MotorCommand) -> Result<(), DriverError> {
+        if time_s > self.state.t_s + 1e-9 {
+            self.idle_until(time_s)
+                .map_err(|e| DriverError::Limit(e.to_string()))?;
+        }
+        self.step_cycle(period_s, cmd)
+            .map_err(|e| DriverError::Limit(e.to_string()))
+    }
+
+    fn read(&mut self, time_s: f64, _period_s: f64) -> Result<DriverState, DriverError> {
+        if time_s > self.state.t_s + 1e-9 {
+            self.idle_until(time_s)
+                .map_err(|e| DriverError::Limit(e.to_string()))?;
+        }
+        Ok(DriverState {
+            time_s,
+            steps: self.state.counter,
+            enabled: self.enabled,
+            moving: self.act.iter().any(|a| a.moving()) || self.state.counter != self.target,
+            limited: self.limited,
+            fault: self.fault,
+        })
+    }
+}
