@@ -68,6 +68,12 @@ enum PlantCommand {
         /// position, the row's `fault` column is 1 and the run goes on).
         #[arg(long)]
         stop_on_fault: bool,
+        /// Write a frame sequence of the run (SVG of the robot's true shape) into this folder.
+        #[arg(long, value_name = "DIR")]
+        frames: Option<PathBuf>,
+        /// With --frames: one frame every N control cycles.
+        #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(1..))]
+        frame_every: u32,
     },
     /// Draw the robot's shape (segments, extensions, links, platform) as SVG.
     Draw {
@@ -104,6 +110,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             capture_frame,
             seed,
             stop_on_fault,
+            frames,
+            frame_every,
         } => {
             let (robot, mut plant) = load(&common)?;
             if let Some(seed) = seed {
@@ -117,6 +125,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 &output,
                 capture_frame,
                 stop_on_fault,
+                frames.as_deref().map(|d| (d, frame_every as usize)),
             )
         }
         PlantCommand::Draw {
@@ -316,8 +325,12 @@ fn run_series(
     output: &Path,
     capture_frame: bool,
     stop_on_fault: bool,
+    frames: Option<(&Path, usize)>,
 ) -> anyhow::Result<()> {
     let mut plant = Plant::new(robot, cfg).context("cannot build the plant")?;
+    if let Some((dir, _)) = frames {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    }
     let table = Table::read(input)?;
     let ct = table.col("t_s")?;
     let cols = [table.col("q1")?, table.col("q2")?, table.col("q3")?];
@@ -469,6 +482,21 @@ fn run_series(
         let drive = plant.read(t, cfg.simulation.cycle_s)?;
         extra.push(Some(f64::from(u8::from(drive.fault))));
         w.write_row(&row, &extra)?;
+        if let Some((dir, every)) = frames {
+            if k % every == 0 {
+                let title = format!(
+                    "t = {t:.2} s, q = ({}, {}, {}): x = {:.2} mm, y = {:.2} mm, phi = {:.2} deg",
+                    q[0],
+                    q[1],
+                    q[2],
+                    s.eq.pose[0],
+                    s.eq.pose[1],
+                    s.eq.pose[2].to_degrees()
+                );
+                let path = dir.join(format!("frame_{:05}.svg", k / every));
+                draw_state(&path, robot, plant.truth(), &s.eq, &title, None)?;
+            }
+        }
         let period = setpoints
             .get(k + 1)
             .map_or(cfg.simulation.cycle_s, |n| n.0 - t);
@@ -526,7 +554,6 @@ fn draw(
     output: &Path,
     cc: bool,
 ) -> anyhow::Result<()> {
-    use plotters::prelude::*;
     let truth = TruthModel::new(robot, cfg).context("the plant has no home equilibrium")?;
     let q: [f64; 3] = match q {
         Some(text) => {
@@ -545,10 +572,6 @@ fn draw(
     let eq = truth
         .solve_steps(&q)
         .with_context(|| format!("no static equilibrium for q = {q:?}"))?;
-    let shapes = pcr_plant::sim::segment_shapes(&truth, &eq);
-    let text = register_font();
-    let root = SVGBackend::new(output, (800, 800)).into_drawing_area();
-    root.fill(&WHITE)?;
     let title = format!(
         "q = ({}, {}, {}) steps: x = {:.2} mm, y = {:.2} mm, phi = {:.2} deg",
         q[0],
@@ -558,27 +581,39 @@ fn draw(
         eq.pose[1],
         eq.pose[2].to_degrees()
     );
+    draw_state(output, robot, &truth, &eq, &title, cc.then_some(q))
+}
+
+/// Draws one equilibrium of the plant (segments, extensions, links, platform); with `cc_q`, the
+/// nominal constant-curvature arcs of those motor positions in grey.
+fn draw_state(
+    output: &Path,
+    robot: &RobotConfig,
+    truth: &TruthModel,
+    eq: &Equilibrium,
+    title: &str,
+    cc_q: Option<[f64; 3]>,
+) -> anyhow::Result<()> {
+    use plotters::prelude::*;
+    pcr_figures::init();
+    let shapes = pcr_plant::sim::segment_shapes(truth, eq);
+    let root = SVGBackend::new(output, (800, 800)).into_drawing_area();
+    root.fill(&WHITE)?;
     let mut builder = ChartBuilder::on(&root);
     builder.margin(10);
-    if text {
-        builder
-            .caption(title, ("sans-serif", 16))
-            .x_label_area_size(30)
-            .y_label_area_size(40);
-    }
+    builder
+        .caption(title, (pcr_figures::FONT_FAMILY, 16))
+        .x_label_area_size(30)
+        .y_label_area_size(40);
     let mut chart = builder.build_cartesian_2d(-320.0..320.0, -320.0..320.0)?;
-    if text {
-        chart
-            .configure_mesh()
-            .x_desc("x (mm)")
-            .y_desc("y (mm)")
-            .draw()?;
-    } else {
-        chart.configure_mesh().disable_axes().draw()?;
-    }
-    let leg_colors = [RED, GREEN, BLUE];
+    chart
+        .configure_mesh()
+        .x_desc("x (mm)")
+        .y_desc("y (mm)")
+        .label_style((pcr_figures::FONT_FAMILY, 12))
+        .draw()?;
     for i in 0..3 {
-        let c = leg_colors[i];
+        let c = pcr_figures::LEG_COLOURS[i];
         let base = truth.statics.legs[i].base;
         chart.draw_series(std::iter::once(Circle::new(
             (base[0], base[1]),
@@ -586,12 +621,10 @@ fn draw(
             BLACK.filled(),
         )))?;
         let seg: Vec<(f64, f64)> = shapes[i].iter().map(|p| (p[0], p[1])).collect();
-        let series = chart.draw_series(LineSeries::new(seg, c.stroke_width(3)))?;
-        if text {
-            series
-                .label(format!("leg {}", i + 1))
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c));
-        }
+        chart
+            .draw_series(LineSeries::new(seg, c.stroke_width(3)))?
+            .label(format!("leg {}", i + 1))
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c));
         let tip = eq.tip[i];
         let m = eq.m[i];
         let p = eq.p[i];
@@ -611,7 +644,7 @@ fn draw(
             )))?;
         }
     }
-    if cc {
+    if let Some(q) = cc_q {
         // Nominal CC arcs: geometry.md eq. 4 with kappa = dl / (a l_C).
         for (i, leg) in robot.legs.iter().enumerate() {
             let g = pcr_plant::model::LegGeometry::from_leg(leg);
@@ -651,7 +684,7 @@ fn draw(
         5,
         BLACK,
     )))?;
-    if text {
+    {
         chart
             .configure_series_labels()
             .border_style(BLACK)
@@ -660,32 +693,6 @@ fn draw(
     }
     root.present()?;
     Ok(())
-}
-
-/// Registers a system TrueType font as "sans-serif" for plotters' text; false if none is found
-/// (the figure is then drawn without text).
-fn register_font() -> bool {
-    const CANDIDATES: [&str; 4] = [
-        "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
-        "/usr/share/fonts/TTF/DejaVuSans.ttf",
-        "/usr/share/fonts/dejavu/DejaVuSans.ttf",
-        "/Library/Fonts/Arial.ttf",
-    ];
-    for path in CANDIDATES {
-        if let Ok(bytes) = std::fs::read(path) {
-            let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());
-            if plotters::style::register_font(
-                "sans-serif",
-                plotters::style::FontStyle::Normal,
-                bytes,
-            )
-            .is_ok()
-            {
-                return true;
-            }
-        }
-    }
-    false
 }
 
 #[cfg(test)]
@@ -724,7 +731,7 @@ mod tests {
             plant: None,
             robot: None,
         };
-        run_series(&robot, &cfg, &common, &input, &output, false, true).unwrap();
+        run_series(&robot, &cfg, &common, &input, &output, false, true, None).unwrap();
         let rec = pcr_recording::Recording::read_path(&output).unwrap();
         assert_eq!(rec.rows.len(), 40);
         assert_eq!(rec.rows[19].pose_id, Some(1));
