@@ -123,9 +123,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 &common,
                 &input,
                 &output,
-                capture_frame,
-                stop_on_fault,
-                frames.as_deref().map(|d| (d, frame_every as usize)),
+                RunOptions {
+                    capture_frame,
+                    stop_on_fault,
+                    frames: frames.as_deref().map(|d| (d, frame_every as usize)),
+                },
             )
         }
         PlantCommand::Draw {
@@ -317,16 +319,27 @@ const RUN_EXTRA: [&str; 37] = [
     "fault",
 ];
 
+/// Options of `pcr plant run` beyond its files.
+struct RunOptions<'a> {
+    capture_frame: bool,
+    stop_on_fault: bool,
+    /// Folder and cycle interval of the frame sequence.
+    frames: Option<(&'a Path, usize)>,
+}
+
 fn run_series(
     robot: &RobotConfig,
     cfg: &PlantConfig,
     common: &Common,
     input: &Path,
     output: &Path,
-    capture_frame: bool,
-    stop_on_fault: bool,
-    frames: Option<(&Path, usize)>,
+    opts: RunOptions<'_>,
 ) -> anyhow::Result<()> {
+    let RunOptions {
+        capture_frame,
+        stop_on_fault,
+        frames,
+    } = opts;
     let mut plant = Plant::new(robot, cfg).context("cannot build the plant")?;
     if let Some((dir, _)) = frames {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
@@ -731,7 +744,12 @@ mod tests {
             plant: None,
             robot: None,
         };
-        run_series(&robot, &cfg, &common, &input, &output, false, true, None).unwrap();
+        let opts = RunOptions {
+            capture_frame: false,
+            stop_on_fault: true,
+            frames: None,
+        };
+        run_series(&robot, &cfg, &common, &input, &output, opts).unwrap();
         let rec = pcr_recording::Recording::read_path(&output).unwrap();
         assert_eq!(rec.rows.len(), 40);
         assert_eq!(rec.rows[19].pose_id, Some(1));
