@@ -1,1 +1,4 @@
-//! Jerk-limited trajectory profiler, paths and interpolator (work in progress).
+//! Jerk-limited trajectory profiler (see [`profiler`]); task-space paths and the 20 ms
+//! interpolator are future work.
+
+pub mod profiler;
