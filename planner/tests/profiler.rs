@@ -437,6 +437,12 @@ fn bad_inputs_are_errors() {
         calculate(&acc),
         Err(ProfileError::TargetOutsideLimits { .. })
     ));
+    // Positive target acceleration at the lower velocity limit: velocity was below it before.
+    let unreachable = input1(rest(0.0), State::new(1.0, -1.0, 0.5), lim);
+    assert!(matches!(
+        calculate(&unreachable),
+        Err(ProfileError::TargetUnreachable { .. })
+    ));
     let mut none = Input::new(0);
     none.dofs = 0;
     assert!(matches!(

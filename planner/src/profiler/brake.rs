@@ -7,7 +7,8 @@
 //!   (`v > vmax`, or `a > 0` and `v + a^2 / (2 jmax) > vmax`), the velocity brake below is used
 //!   from the start instead.
 //! * velocity brake: jerk `-jmax` until the velocity comes back down to `vmax`; if the
-//!   acceleration reaches `amin` first, hold `amin` until `v = vmax`.
+//!   acceleration reaches `amin` first, hold `amin` until `v = vmax`. Either phase ends early
+//!   when going on would force an undershoot of `vmin` later (narrow velocity range).
 
 use super::limits::{Limits, State};
 use super::profile::Profile;
@@ -21,18 +22,23 @@ fn exceeds_vmax(s: &State, lim: &Limits) -> bool {
     s.v > lim.vmax + tol || (s.a > 0.0 && s.v + s.a * s.a / (2.0 * lim.jmax) > lim.vmax + tol)
 }
 
-/// Velocity brake downwards (see module doc), appended to `out`.
+/// Velocity brake downwards (see module doc), appended to `out`. The brake also ends as soon
+/// as continuing it would make the velocity undershoot `vmin` afterwards
+/// (`v - a^2 / (2 jmax) = vmin` with `a < 0`), so that the profile after it stays feasible.
 fn brake_velocity_down(s: &State, lim: &Limits, out: &mut Profile) {
     let j = lim.jmax;
     let disc = (s.a * s.a + 2.0 * j * (s.v - lim.vmax)).max(0.0);
-    let t = (s.a + disc.sqrt()) / j;
-    if s.a - j * t >= lim.amin {
+    let t_v = (s.a + disc.sqrt()) / j;
+    let t_opp = (s.a + (s.a * s.a / 2.0 + j * (s.v - lim.vmin)).max(0.0).sqrt()) / j;
+    let t_amin = ((s.a - lim.amin) / j).max(0.0);
+    let t = t_v.min(t_opp);
+    if t <= t_amin {
         out.push(t, -j);
     } else {
-        let t1 = ((s.a - lim.amin) / j).max(0.0);
-        let s1 = s.integrate(t1, -j);
-        out.push(t1, -j);
-        out.push(((s1.v - lim.vmax) / -lim.amin).max(0.0), 0.0);
+        let s1 = s.integrate(t_amin, -j);
+        out.push(t_amin, -j);
+        let v_end = lim.vmax.max(lim.vmin + lim.amin * lim.amin / (2.0 * j));
+        out.push(((s1.v - v_end) / -lim.amin).max(0.0), 0.0);
     }
 }
 

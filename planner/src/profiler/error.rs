@@ -39,6 +39,27 @@ pub enum ProfileError {
         /// Upper limit.
         max: f64,
     },
+    /// The target state can only be reached through a velocity outside the limits: with a
+    /// negative target acceleration the velocity just before was at least
+    /// `v + a^2 / (2 jmax)`, with a positive one at most `v - a^2 / (2 jmax)`.
+    #[error(
+        "target state of DoF {dof} (v = {v}, a = {a}) can only be reached through velocity \
+         {reached}, outside its limits [{min}, {max}]"
+    )]
+    TargetUnreachable {
+        /// Degree of freedom index.
+        dof: usize,
+        /// Target velocity.
+        v: f64,
+        /// Target acceleration.
+        a: f64,
+        /// Velocity inevitably passed just before reaching the target.
+        reached: f64,
+        /// Lower velocity limit.
+        min: f64,
+        /// Upper velocity limit.
+        max: f64,
+    },
     /// Wrong number of degrees of freedom in one of the input vectors.
     #[error("{what} has {got} entries, expected {expected} (one per DoF, at most {max})")]
     DofMismatch {

@@ -129,6 +129,20 @@ impl Input {
                     max: lim.amax,
                 });
             }
+            if self.control_interface == ControlInterface::Position {
+                let reached = t.v - t.a * t.a.abs() / (2.0 * lim.jmax);
+                let tol = 1e-12 * lim.vmax.abs().max(lim.vmin.abs());
+                if reached > lim.vmax + tol || reached < lim.vmin - tol {
+                    return Err(ProfileError::TargetUnreachable {
+                        dof: i,
+                        v: t.v,
+                        a: t.a,
+                        reached,
+                        min: lim.vmin,
+                        max: lim.vmax,
+                    });
+                }
+            }
         }
         Ok(())
     }

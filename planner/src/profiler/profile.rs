@@ -143,11 +143,29 @@ impl Profile {
     ) -> bool {
         let tv = rel * lim.vmax.abs().max(lim.vmin.abs());
         let ta = rel * lim.amax.abs().max(lim.amin.abs());
-        let vok = |v: f64| !check_velocity || (v <= lim.vmax + tv && v >= lim.vmin - tv);
+        let vin = |v: f64| v <= lim.vmax + tv && v >= lim.vmin - tv;
         let aok = |a: f64| a <= lim.amax + ta && a >= lim.amin - ta;
+        // A start velocity outside the limits (left by a brake pre-trajectory) is tolerated
+        // until the velocity first enters the limits, as long as it does not move further out.
+        let v_start = if first < self.n { self.s[first].v } else { 0.0 };
+        let mut entered = !check_velocity || vin(v_start);
+        let mut vok = |v: f64| {
+            if !check_velocity {
+                return true;
+            }
+            if entered {
+                return vin(v);
+            }
+            if vin(v) {
+                entered = true;
+                return true;
+            }
+            let out_by = |x: f64| (x - lim.vmax).max(lim.vmin - x);
+            out_by(v) <= out_by(v_start) + tv
+        };
         for i in first..self.n {
             let (s, e) = (self.s[i], self.s[i + 1]);
-            if !(aok(e.a) && vok(e.v)) || (i == first && !(aok(s.a) && vok(s.v))) {
+            if i == first && !(aok(s.a) && vok(s.v)) {
                 return false;
             }
             let j = self.j[i];
@@ -156,6 +174,9 @@ impl Profile {
                 if tc > 0.0 && tc < self.t[i] && !vok(s.integrate(tc, j).v) {
                     return false;
                 }
+            }
+            if !(aok(e.a) && vok(e.v)) {
+                return false;
             }
         }
         true
