@@ -2,7 +2,8 @@
 //! the velocity limit because of its acceleration), a short trajectory at full jerk first brings
 //! it back inside; the time-optimal profile then starts from the state at its end.
 //!
-//! Rules (upper side; the lower side is mirrored):
+//! Rules (upper side; the lower side is mirrored; the lower side is examined first when the
+//! acceleration is negative):
 //! * `a0 > amax`: jerk `-jmax` until `a = amax`; if the velocity would then still exceed `vmax`
 //!   (`v > vmax`, or `a > 0` and `v + a^2 / (2 jmax) > vmax`), the velocity brake below is used
 //!   from the start instead.
@@ -53,8 +54,12 @@ fn brake_upper(s: &State, lim: &Limits, out: &mut Profile) -> bool {
         } else {
             out.push(t1, -lim.jmax);
             if s1.v < lim.vmin {
-                // Still below the lower velocity limit: hold amax until it is reached.
-                out.push((lim.vmin - s1.v) / lim.amax, 0.0);
+                // Still below the lower velocity limit: hold amax until it is reached, or until
+                // ramping the acceleration down would overshoot vmax.
+                let v_end = lim
+                    .vmin
+                    .min(lim.vmax - lim.amax * lim.amax / (2.0 * lim.jmax));
+                out.push(((v_end - s1.v) / lim.amax).max(0.0), 0.0);
             }
         }
         return true;
@@ -69,15 +74,23 @@ fn brake_upper(s: &State, lim: &Limits, out: &mut Profile) -> bool {
 /// Brake pre-trajectory for the position interface. The returned profile is empty if the state
 /// is within the limits.
 pub fn position_brake(s: State, lim: &Limits) -> Profile {
-    let mut out = Profile::new(s);
-    if brake_upper(&s, lim, &mut out) {
-        return out;
+    // With a negative acceleration the lower side is the one that matters first (an upper
+    // violation resolves itself), and vice versa.
+    let lower_first = s.a < 0.0;
+    for lower in [lower_first, !lower_first] {
+        if lower {
+            let mut mirrored = Profile::new(s.neg());
+            if brake_upper(&s.neg(), &lim.mirrored(), &mut mirrored) {
+                return mirrored.neg();
+            }
+        } else {
+            let mut out = Profile::new(s);
+            if brake_upper(&s, lim, &mut out) {
+                return out;
+            }
+        }
     }
-    let mut mirrored = Profile::new(s.neg());
-    if brake_upper(&s.neg(), &lim.mirrored(), &mut mirrored) {
-        return mirrored.neg();
-    }
-    out
+    Profile::new(s)
 }
 
 /// Brake pre-trajectory for the velocity interface (acceleration limits only).

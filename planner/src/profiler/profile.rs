@@ -146,7 +146,8 @@ impl Profile {
         let vin = |v: f64| v <= lim.vmax + tv && v >= lim.vmin - tv;
         let aok = |a: f64| a <= lim.amax + ta && a >= lim.amin - ta;
         // A start velocity outside the limits (left by a brake pre-trajectory) is tolerated
-        // until the velocity first enters the limits, as long as it does not move further out.
+        // until the velocity first enters the limits, as long as it stays on the same side and does
+        // not move further out.
         let v_start = if first < self.n { self.s[first].v } else { 0.0 };
         let mut entered = !check_velocity || vin(v_start);
         let mut vok = |v: f64| {
@@ -160,8 +161,12 @@ impl Profile {
                 entered = true;
                 return true;
             }
-            let out_by = |x: f64| (x - lim.vmax).max(lim.vmin - x);
-            out_by(v) <= out_by(v_start) + tv
+            // Still outside: only on the side of the start, and not further out.
+            if v_start > lim.vmax {
+                v > lim.vmax && v <= v_start + tv
+            } else {
+                v < lim.vmin && v >= v_start - tv
+            }
         };
         for i in first..self.n {
             let (s, e) = (self.s[i], self.s[i + 1]);

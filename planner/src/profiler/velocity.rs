@@ -65,22 +65,25 @@ fn solve_ud(pr: &Problem, goal: Goal, out: &mut impl FnMut(Shape)) {
     let j = lim.jmax;
     let amax = lim.amax;
     let dv = vf - v0;
-    // Without plateau.
-    let a1 = match goal {
+    // Without plateau. Reaching the target velocity, the peak may be either root (a negative
+    // peak is valid when both a0 and af are below it).
+    let peaks = match goal {
         Goal::Position => {
             let sq = (2.0 * j * dv + a0 * a0 + af * af) / 2.0;
             if sq < 0.0 {
-                f64::NAN
+                [f64::NAN; 2]
             } else {
-                sq.sqrt()
+                [sq.sqrt(), -sq.sqrt()]
             }
         }
-        Goal::Duration(td) => (j * td + a0 + af) / 2.0,
+        Goal::Duration(td) => [(j * td + a0 + af) / 2.0, f64::NAN],
     };
-    if a1.is_finite() {
-        let t = [(a1 - a0) / j, 0.0, (a1 - af) / j, 0.0, 0.0, 0.0, 0.0];
-        if let Some(s) = validate(pr, t, goal) {
-            out(s);
+    for a1 in peaks {
+        if a1.is_finite() {
+            let t = [(a1 - a0) / j, 0.0, (a1 - af) / j, 0.0, 0.0, 0.0, 0.0];
+            if let Some(s) = validate(pr, t, goal) {
+                out(s);
+            }
         }
     }
     // With plateau at amax.
