@@ -189,41 +189,39 @@ impl Poly {
     }
 }
 
-/// Bisection with secant steps on a bracket `[a, b]` where `p(a)` has sign of `fa` and
-/// `p(b)` the opposite sign; converges to adjacent floating point numbers.
-fn bisect(p: &Poly, mut a: f64, mut b: f64, mut fa: f64) -> f64 {
-    let mut fb = p.eval(b);
-    for it in 0..200 {
-        // Alternate a regula-falsi step (fast on smooth monotone pieces) with plain bisection
-        // (guaranteed progress).
-        let mut m = if it % 2 == 0 && fa != fb {
-            a - fa * (b - a) / (fb - fa)
+/// Safeguarded Newton iteration on a bracket `[a, b]` where `p(a)` has the sign of `fa` and
+/// `p(b)` the opposite sign: Newton steps while they stay inside the shrinking bracket, bisection
+/// otherwise; converges to (nearly) adjacent floating point numbers.
+fn bisect(p: &Poly, mut a: f64, mut b: f64, fa: f64) -> f64 {
+    let dp = p.deriv();
+    let sa = fa.signum();
+    let mut x = 0.5 * (a + b);
+    for _ in 0..100 {
+        let fx = p.eval(x);
+        if fx == 0.0 {
+            return x;
+        }
+        if fx.signum() == sa {
+            a = x;
+        } else {
+            b = x;
+        }
+        let d = dp.eval(x);
+        let newton = x - fx / d;
+        let (lo, hi) = (a.min(b), a.max(b));
+        let next = if d != 0.0 && newton > lo && newton < hi {
+            newton
         } else {
             0.5 * (a + b)
         };
-        if !(m > a.min(b) && m < a.max(b)) {
-            m = 0.5 * (a + b);
+        if (next - x).abs() <= 4.0 * f64::EPSILON * x.abs().max(f64::MIN_POSITIVE)
+            || (hi - lo) <= 4.0 * f64::EPSILON * lo.abs().max(hi.abs())
+        {
+            return next;
         }
-        if m == a || m == b {
-            break;
-        }
-        let fm = p.eval(m);
-        if fm == 0.0 {
-            return m;
-        }
-        if fm.signum() == fa.signum() {
-            a = m;
-            fa = fm;
-        } else {
-            b = m;
-            fb = fm;
-        }
+        x = next;
     }
-    if fa.abs() < fb.abs() {
-        a
-    } else {
-        b
-    }
+    x
 }
 
 #[cfg(test)]

@@ -29,9 +29,6 @@ pub struct Step1 {
     start: State,
     cand: [Shape; MAX_CANDIDATES],
     n_cand: usize,
-    /// Feasible intervals of the main-profile duration in s (`hi` may be infinite).
-    intervals: [(f64, f64); MAX_INTERVALS],
-    n_int: usize,
 }
 
 impl Step1 {
@@ -58,8 +55,6 @@ impl Step1 {
                 dir: 1.0,
             }; MAX_CANDIDATES],
             n_cand: 0,
-            intervals: [(0.0, 0.0); MAX_INTERVALS],
-            n_int: 0,
         };
         let mut all = [Shape {
             t: [0.0; 7],
@@ -103,7 +98,6 @@ impl Step1 {
                 s.n_cand += 1;
             }
         }
-        s.build_intervals();
         Some(s)
     }
 
@@ -148,20 +142,6 @@ impl Step1 {
         }
     }
 
-    fn build_intervals(&mut self) {
-        let mut lo = self.cand[0].duration();
-        for i in 0..self.n_cand - 1 {
-            let (a, b) = (self.cand[i].duration(), self.cand[i + 1].duration());
-            if !self.feasible_main(0.5 * (a + b)) && self.n_int < MAX_INTERVALS - 1 {
-                self.intervals[self.n_int] = (lo, a);
-                self.n_int += 1;
-                lo = b;
-            }
-        }
-        self.intervals[self.n_int] = (lo, f64::INFINITY);
-        self.n_int += 1;
-    }
-
     /// Duration of the brake pre-trajectory in s.
     pub fn brake_duration(&self) -> f64 {
         self.brake.duration()
@@ -169,22 +149,51 @@ impl Step1 {
 
     /// Minimal total duration (brake included) in s.
     pub fn t_min(&self) -> f64 {
-        self.brake_duration() + self.intervals[0].0
+        self.brake_duration() + self.cand[0].duration()
     }
 
-    /// Feasible intervals of the total duration (brake included) in s; `hi` may be infinite.
-    pub fn feasible_intervals(&self) -> impl Iterator<Item = (f64, f64)> + '_ {
+    /// Total durations (brake included, s) of all extremal profiles reaching the target,
+    /// ascending: the boundaries of the feasible set.
+    pub fn boundaries(&self) -> impl Iterator<Item = f64> + '_ {
         let tb = self.brake_duration();
-        self.intervals[..self.n_int]
+        self.cand[..self.n_cand]
             .iter()
-            .map(move |(a, b)| (a + tb, b + tb))
+            .map(move |c| c.duration() + tb)
     }
 
-    /// True if the total duration `t` (s) is feasible (with a relative tolerance of 1e-12).
+    /// Feasible intervals of the total duration (brake included) in s, ascending; the last one
+    /// is unbounded. Rebuilt from the boundaries by testing the midpoint of every gap (cost:
+    /// a few fixed-duration solves; not needed for synchronisation, which tests candidates
+    /// directly).
+    pub fn feasible_intervals(&self) -> ([(f64, f64); MAX_INTERVALS], usize) {
+        let tb = self.brake_duration();
+        let mut out = [(0.0, 0.0); MAX_INTERVALS];
+        let mut n = 0;
+        let mut lo = self.cand[0].duration();
+        for i in 0..self.n_cand - 1 {
+            let (a, b) = (self.cand[i].duration(), self.cand[i + 1].duration());
+            if !self.feasible_main(0.5 * (a + b)) && n < MAX_INTERVALS - 1 {
+                out[n] = (lo + tb, a + tb);
+                n += 1;
+                lo = b;
+            }
+        }
+        out[n] = (lo + tb, f64::INFINITY);
+        (out, n + 1)
+    }
+
+    /// True if the total duration `t` (s, brake included) admits a trajectory to the target.
+    /// Durations within 1e-12 (relative) of a boundary count as feasible.
     pub fn is_feasible(&self, t: f64) -> bool {
-        let tol = 1e-12 * t.abs().max(1.0);
-        self.feasible_intervals()
-            .any(|(a, b)| t >= a - tol && t <= b + tol)
+        let td = t - self.brake_duration();
+        let tol = 1e-12 * td.abs().max(1.0);
+        if td < self.cand[0].duration() - tol {
+            return false;
+        }
+        self.cand[..self.n_cand]
+            .iter()
+            .any(|c| (c.duration() - td).abs() <= tol)
+            || self.feasible_main(td)
     }
 
     /// The time-optimal profile (brake included).
