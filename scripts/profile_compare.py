@@ -153,6 +153,46 @@ def generate(seed, scale):
                   min_dur=rng.uniform(0.5, 8.0))
         for k in range(n(20)) for lim in [rnd_limits(rng, 2, False)]
     ]
+    stress = []
+    for k in range(n(80)):
+        kind = k % 8
+        dofs = 3
+        lim = rnd_limits(rng, dofs, k % 3 == 0)
+        if kind == 0:  # wide scale spread of the limits
+            for i in range(dofs):
+                lim["jmax"][i] *= rng.choice([0.01, 100.0])
+                lim["amax"][i] *= rng.choice([0.1, 10.0])
+                lim["amin"][i] = -lim["amax"][i]
+        cur = [rnd_state_inside(rng, lim, i) for i in range(dofs)]
+        tgt = [rnd_target(rng, lim, i, "any") for i in range(dofs)]
+        if kind == 1:  # zero displacement, moving
+            tgt = [(cur[i][0], tgt[i][1], tgt[i][2]) for i in range(dofs)]
+        elif kind == 2:  # starting exactly on the limits
+            cur = [(cur[i][0], lim["vmax"][i], 0.0) if i % 2 == 0 else
+                   (cur[i][0], lim["vmin"][i] + lim["amax"][i] ** 2 / (2 * lim["jmax"][i]) * 0.0, 0.0)
+                   for i in range(dofs)]
+        elif kind == 3:  # long distances
+            tgt = [(rng.uniform(-1000, 1000), t[1], t[2]) for t in tgt]
+        elif kind == 4:  # tiny distances
+            tgt = [(cur[i][0] + rng.uniform(-1e-4, 1e-4), 0.0, 0.0) for i in range(dofs)]
+        elif kind == 5:  # several DoFs outside the limits
+            cur = [(c[0], rng.choice([1, -1]) * lim["vmax"][i] * rng.uniform(0.5, 1.5),
+                    rng.choice([1, -1]) * lim["amax"][i] * rng.uniform(0.0, 1.5)) for i, c in enumerate(cur)]
+        elif kind == 6:  # phase synchronisation of a collinear moving state
+            direction = [rng.uniform(-1, 1) for _ in range(dofs)]
+            s = rng.uniform(0.1, 0.5)
+            cur = [(0.0, s * direction[i] * 0.3, 0.0) for i in range(dofs)]
+            tgt = [(2.0 * direction[i], 0.0, 0.0) for i in range(dofs)]
+        sync = "phase" if kind == 6 else rng.choice(["time", "time", "phase"])
+        stress.append(make_case(f"stress-{k}", dofs, cur, tgt, lim, sync=sync,
+                                min_dur=rng.uniform(0.0, 3.0) if kind == 7 else None))
+    for k in range(n(20)):
+        lim = rnd_limits(rng, 2, True)
+        cur = [(0.0, rng.uniform(-2, 2), rng.uniform(lim["amin"][i], lim["amax"][i])) for i in range(2)]
+        tgt = [(0.0, rng.uniform(-2, 2), 0.0) for i in range(2)]
+        stress.append(make_case(f"stress-vel-{k}", 2, cur, tgt, lim, ci="velocity",
+                                sync=rng.choice(["time", "none", "phase"])))
+    sets["stress"] = stress
     return sets
 
 

@@ -149,15 +149,17 @@ impl Poly {
                 pts[1..=nc].copy_from_slice(&crit[..nc]);
                 pts[nc + 1] = hi;
                 let npts = nc + 2;
-                // Scale for "negligible": magnitude of the terms at the interval ends.
+                // "Negligible" value at x: the rounding-error scale of evaluating p there.
+                let tiny_at = |x: f64| {
+                    let mut mag = 0.0f64;
+                    let mut xp = 1.0;
+                    for i in 0..=p.deg {
+                        mag += (p.c[i] * xp).abs();
+                        xp *= x.abs();
+                    }
+                    mag * 1e-13
+                };
                 let xs = lo.abs().max(hi.abs()).max(1e-300);
-                let mut mag = 0.0f64;
-                let mut xp = 1.0;
-                for i in 0..=p.deg {
-                    mag = mag.max((p.c[i] * xp).abs());
-                    xp *= xs;
-                }
-                let tiny = mag * 1e-13;
                 let mut n = 0;
                 let mut push = |r: f64, n: &mut usize| {
                     if *n > 0 && (r - out[*n - 1]).abs() <= 1e-14 * xs {
@@ -171,9 +173,14 @@ impl Poly {
                 for k in 0..npts - 1 {
                     let (a, b) = (pts[k], pts[k + 1]);
                     let (fa, fb) = (p.eval(a), p.eval(b));
-                    if fa == 0.0 || (k > 0 && fa.abs() <= tiny) {
+                    if fa == 0.0 {
                         push(a, &mut n);
                         continue;
+                    }
+                    if k > 0 && fa.abs() <= tiny_at(a) {
+                        // Possibly a double root at a critical point; keep looking for a
+                        // sign change in the piece as well.
+                        push(a, &mut n);
                     }
                     if fa.signum() != fb.signum() && fb != 0.0 {
                         push(bisect(&p, a, b, fa), &mut n);

@@ -355,15 +355,70 @@ pub fn solve_case(pr: &Problem, case: Case, goal: Goal, out: &mut impl FnMut(Sha
         if cp.hom && r <= 0.0 {
             continue;
         }
-        let den = if cp.hom { r } else { 1.0 };
-        let mut t = [0.0; 7];
-        for (ti, pi) in t.iter_mut().zip(&cp.t) {
-            *ti = pi.eval(r) / den;
-        }
-        if let Some(s) = validate(pr, t, goal, &tol) {
+        let r = match goal {
+            Goal::Position => polish(pr, &cp, r),
+            Goal::Duration(_) => r,
+        };
+        if let Some(s) = validate(pr, durations(&cp, r), goal, &tol) {
             out(s);
         }
     }
+}
+
+/// Phase durations of a polynomial case at parameter `r`.
+fn durations(cp: &CasePolys, r: f64) -> [f64; 7] {
+    let den = if cp.hom { r } else { 1.0 };
+    let mut t = [0.0; 7];
+    for (ti, pi) in t.iter_mut().zip(&cp.t) {
+        *ti = pi.eval(r) / den;
+    }
+    t
+}
+
+/// Final position error of a polynomial case at parameter `r`, by direct integration (better
+/// conditioned than the expanded polynomial when the limits differ by orders of magnitude).
+fn position_error(pr: &Problem, cp: &CasePolys, r: f64) -> f64 {
+    let t = durations(cp, r);
+    let jerks = pr.jerks();
+    let mut s = State::new(0.0, pr.v0, pr.a0);
+    for (ti, jk) in t.iter().zip(jerks) {
+        s = s.integrate(*ti, jk);
+    }
+    s.p - pr.d
+}
+
+/// Secant refinement of a root of the expanded polynomial on the directly integrated final
+/// position; keeps the better of the two.
+fn polish(pr: &Problem, cp: &CasePolys, r0: f64) -> f64 {
+    let mut x0 = r0;
+    let mut f0 = position_error(pr, cp, x0);
+    let best = (x0, f0.abs());
+    let h = 1e-7 * r0.abs().max(1e-3 * (cp.hi - cp.lo).abs()).max(1e-300);
+    let mut x1 = r0 + h;
+    let mut f1 = position_error(pr, cp, x1);
+    let mut best = if f1.abs() < best.1 {
+        (x1, f1.abs())
+    } else {
+        best
+    };
+    for _ in 0..8 {
+        if f1 == f0 || best.1 == 0.0 {
+            break;
+        }
+        let x2 = x1 - f1 * (x1 - x0) / (f1 - f0);
+        if !x2.is_finite() {
+            break;
+        }
+        let f2 = position_error(pr, cp, x2);
+        if f2.abs() < best.1 {
+            best = (x2, f2.abs());
+        }
+        (x0, f0, x1, f1) = (x1, f1, x2, f2);
+        if (x1 - x0).abs() <= 1e-15 * x1.abs() {
+            break;
+        }
+    }
+    best.0
 }
 
 /// Velocity-plateau case: accelerate to (vmax, 0), cruise, decelerate to the target.
