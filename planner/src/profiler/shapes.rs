@@ -505,3 +505,131 @@ pub fn extreme_at(pr: &Problem, dir: f64, td: f64) -> Option<(f64, Shape)> {
     }
     best.map(|(p, s)| (dir * p, Shape { t: s.t, dir }))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Solves `case` for the target position; checks every solution's invariants (no negative
+    /// duration, limits, final state) and that the fixed-duration solver of the same case at the
+    /// shortest solution's duration lands on the target too. Returns the shortest duration.
+    fn check_case(pr: &Problem, case: Case) -> f64 {
+        let mut best: Option<Shape> = None;
+        solve_case(pr, case, Goal::Position, &mut |s: Shape| {
+            assert!(s.t.iter().all(|t| *t >= 0.0));
+            let prof = s.profile(State::new(0.0, pr.v0, pr.a0), pr.lim.jmax);
+            assert!(prof.within_limits(&pr.lim, 1e-9));
+            let e = prof.end();
+            assert!((e.p - pr.d).abs() < 1e-8 * pr.d.abs().max(1.0));
+            assert!((e.v - pr.vf).abs() < 1e-8 && (e.a - pr.af).abs() < 1e-8);
+            if best.is_none_or(|b| s.duration() < b.duration()) {
+                best = Some(s);
+            }
+        });
+        let best = best.unwrap_or_else(|| panic!("{case:?} found no solution"));
+        let td = best.duration();
+        let (p, _) = extreme_at(pr, 1.0, td).expect("extreme at the optimum");
+        assert!(
+            (p - pr.d).abs() < 1e-8 * pr.d.abs().max(1.0),
+            "{p} vs {}",
+            pr.d
+        );
+        // Nothing shorter over all cases and both directions.
+        solve_all(pr, Goal::Position, &mut |s: Shape| {
+            assert!(s.duration() >= td - 1e-9, "{case:?}: shorter shape {s:?}");
+        });
+        td
+    }
+
+    fn problem(d: f64, lim: Limits) -> Problem {
+        Problem::new(&State::new(0.0, 0.0, 0.0), &State::new(d, 0.0, 0.0), &lim)
+    }
+
+    #[test]
+    fn ramps_only() {
+        let pr = problem(0.3, Limits::symmetric(10.0, 10.0, 2.0));
+        let td = check_case(&pr, Case::Ramps);
+        assert!((td - 4.0 * (0.3f64 / 4.0).cbrt()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn plateau_amax_only() {
+        // Small amax, large |amin|: only the acceleration phase saturates.
+        let lim = Limits {
+            vmax: 100.0,
+            vmin: -100.0,
+            amax: 0.5,
+            amin: -5.0,
+            jmax: 1.0,
+        };
+        check_case(&problem(3.0, lim), Case::PlateauAmax);
+    }
+
+    #[test]
+    fn plateau_amin_only() {
+        let lim = Limits {
+            vmax: 100.0,
+            vmin: -100.0,
+            amax: 5.0,
+            amin: -0.5,
+            jmax: 1.0,
+        };
+        check_case(&problem(3.0, lim), Case::PlateauAmin);
+    }
+
+    #[test]
+    fn plateau_both_accelerations() {
+        let pr = problem(5.0, Limits::symmetric(100.0, 1.0, 4.0));
+        check_case(&pr, Case::PlateauBoth);
+    }
+
+    #[test]
+    fn plateau_vmax() {
+        let pr = problem(10.0, Limits::symmetric(1.0, 2.0, 10.0));
+        let td = check_case(&pr, Case::PlateauVmax);
+        assert!((td - (10.0 + 0.5 + 0.2)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn mirrored_shape_for_negative_motion() {
+        let pr = problem(-10.0, Limits::symmetric(1.0, 2.0, 10.0));
+        let mut found = false;
+        solve_all(&pr, Goal::Position, &mut |s: Shape| {
+            if s.dir < 0.0 && (s.duration() - 10.7).abs() < 1e-12 {
+                found = true;
+            }
+        });
+        assert!(found);
+    }
+
+    #[test]
+    fn fixed_duration_extremes_bracket_the_target() {
+        // For durations above the optimum the target lies between Pmin and Pmax.
+        let pr = Problem::new(
+            &State::new(0.0, 0.4, -0.3),
+            &State::new(1.0, 0.2, 0.1),
+            &Limits::symmetric(1.0, 1.0, 1.0),
+        );
+        let mut tmin = f64::INFINITY;
+        solve_all(&pr, Goal::Position, &mut |s: Shape| {
+            tmin = tmin.min(s.duration())
+        });
+        for k in 1..20 {
+            let t = tmin * (1.0 + 0.1 * k as f64);
+            let (hi, _) = extreme_at(&pr, 1.0, t).unwrap();
+            let (lo, _) = extreme_at(&pr, -1.0, t).unwrap();
+            assert!(
+                lo <= pr.d + 1e-12 && pr.d <= hi + 1e-12,
+                "t {t}: [{lo}, {hi}]"
+            );
+        }
+        let (hi, _) = extreme_at(&pr, 1.0, tmin * 0.99).unwrap_or((
+            f64::NEG_INFINITY,
+            Shape {
+                t: [0.0; 7],
+                dir: 1.0,
+            },
+        ));
+        assert!(hi < pr.d);
+    }
+}

@@ -119,3 +119,66 @@ pub fn extreme_at(pr: &Problem, dir: f64, td: f64) -> Option<(f64, Shape)> {
     });
     best.map(|(v, s)| (dir * v, Shape { t: s.t, dir }))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::profiler::limits::Limits;
+
+    fn shapes_of(v0: f64, a0: f64, vf: f64, af: f64) -> Vec<Shape> {
+        let pr = Problem::new(
+            &State::new(0.0, v0, a0),
+            &State::new(0.0, vf, af),
+            &Limits::symmetric(1.0, 1.0, 1.0),
+        );
+        let mut out = Vec::new();
+        solve_all(&pr, Goal::Position, &mut |s: Shape| {
+            let e = s.profile(State::new(0.0, v0, a0), 1.0).end();
+            assert!((e.v - vf).abs() < 1e-12 && (e.a - af).abs() < 1e-12);
+            out.push(s);
+        });
+        out
+    }
+
+    #[test]
+    fn ud_without_plateau() {
+        // dv = 0.5 < amax^2 / j: peak sqrt(0.5).
+        let s = shapes_of(0.0, 0.0, 0.5, 0.0);
+        let t = s.iter().map(|s| s.duration()).fold(f64::INFINITY, f64::min);
+        assert!((t - 2.0 * 0.5f64.sqrt()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn ud_with_plateau() {
+        let s = shapes_of(0.5, 0.0, 2.0, 0.0);
+        let t = s.iter().map(|s| s.duration()).fold(f64::INFINITY, f64::min);
+        assert!((t - 2.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn du_with_positive_trough() {
+        // Both accelerations strongly positive: the minimising (DU) shape reaching the target
+        // velocity keeps a positive trough (its mirrored peak is negative). This is a boundary
+        // of the feasible set (a blocked interval starts there).
+        let lim = Limits {
+            vmax: 2.233,
+            vmin: -2.479,
+            amax: 3.4248,
+            amin: -1.5961,
+            jmax: 0.8428,
+        };
+        let (v0, a0, vf, af) = (-1.92018, 2.08541, 1.27833, 1.95189);
+        let pr = Problem::new(&State::new(0.0, v0, a0), &State::new(0.0, vf, af), &lim);
+        let mut found = false;
+        solve_all(&pr, Goal::Position, &mut |s: Shape| {
+            let prof = s.profile(State::new(0.0, v0, a0), lim.jmax);
+            let e = prof.end();
+            assert!((e.v - vf).abs() < 1e-9 && (e.a - af).abs() < 1e-9);
+            let trough = a0 - lim.jmax * s.t[0];
+            if s.dir < 0.0 && trough > 0.0 {
+                found = true;
+            }
+        });
+        assert!(found);
+    }
+}
