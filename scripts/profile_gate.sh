@@ -5,6 +5,6 @@ cd "$(dirname "$0")/.."
 rustfmt --edition 2021 --check planner/src/lib.rs planner/src/*/*.rs planner/tests/*.rs \
   planner/benches/*.rs pcr/src/profile.rs
 cargo clippy -q -p pcr-planner -p pcr --all-targets -- -D warnings
-cargo test -q -p pcr-planner 2>&1 | grep -E "^test result" 
-! cargo test -q -p pcr-planner 2>&1 | grep -q "FAILED"
+out=$(cargo test -q -p pcr-planner 2>&1) || { echo "$out"; exit 1; }
+echo "$out" | grep -E "^test result"
 echo "gate: ok"
