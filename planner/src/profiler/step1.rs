@@ -103,7 +103,7 @@ impl Step1 {
 
     fn zero_solution(&self) -> bool {
         let pr = &self.problem;
-        let tv = 1e-12 * pr.lim.vmax.abs().max(1.0);
+        let tv = 1e-12 * pr.v0.abs().max(pr.vf.abs()).max(1.0);
         let ta = 1e-12 * pr.lim.amax.abs().max(1.0);
         let pos_ok = match self.interface {
             ControlInterface::Position => pr.d.abs() <= 1e-12 * pr.d.abs().max(1.0),
