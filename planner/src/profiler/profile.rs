@@ -141,50 +141,18 @@ impl Profile {
         rel: f64,
         check_velocity: bool,
     ) -> bool {
-        let tv = rel * lim.vmax.abs().max(lim.vmin.abs());
-        let ta = rel * lim.amax.abs().max(lim.amin.abs());
-        let vin = |v: f64| v <= lim.vmax + tv && v >= lim.vmin - tv;
-        let aok = |a: f64| a <= lim.amax + ta && a >= lim.amin - ta;
-        // A start velocity outside the limits (left by a brake pre-trajectory) is tolerated
-        // until the velocity first enters the limits, as long as it stays on the same side and does
-        // not move further out.
-        let v_start = if first < self.n { self.s[first].v } else { 0.0 };
-        let mut entered = !check_velocity || vin(v_start);
-        let mut vok = |v: f64| {
-            if !check_velocity {
-                return true;
-            }
-            if entered {
-                return vin(v);
-            }
-            if vin(v) {
-                entered = true;
-                return true;
-            }
-            // Still outside: only on the side of the start, and not further out.
-            if v_start > lim.vmax {
-                v > lim.vmax && v <= v_start + tv
-            } else {
-                v < lim.vmin && v >= v_start - tv
-            }
-        };
-        for i in first..self.n {
-            let (s, e) = (self.s[i], self.s[i + 1]);
-            if i == first && !(aok(s.a) && vok(s.v)) {
-                return false;
-            }
-            let j = self.j[i];
-            if j != 0.0 && check_velocity {
-                let tc = -s.a / j;
-                if tc > 0.0 && tc < self.t[i] && !vok(s.integrate(tc, j).v) {
-                    return false;
-                }
-            }
-            if !(aok(e.a) && vok(e.v)) {
-                return false;
-            }
+        if first >= self.n {
+            return true;
         }
-        true
+        integrate_checked(
+            self.s[first],
+            &self.t[first..self.n],
+            &self.j[first..self.n],
+            lim,
+            rel,
+            check_velocity,
+        )
+        .is_some()
     }
 
     /// Position extrema over `[0, duration]`.
@@ -280,6 +248,67 @@ impl Profile {
     pub fn neg(&self) -> Profile {
         self.scaled(-1.0)
     }
+}
+
+/// Integrates constant-jerk segments (`durations` s, `jerks` u/s^3) from `start` and checks the
+/// limits on the way (segment ends and interior velocity extrema, widened by `rel` times the limit
+/// magnitudes; `check_velocity = false` checks the acceleration only). Returns the final state, or
+/// None if a limit is violated. No profile is built (used by the shape solvers' validation).
+///
+/// A start velocity outside the limits (left by a brake pre-trajectory) is tolerated until the
+/// velocity first enters the limits, as long as it stays on the side of the start and does not
+/// move further out.
+pub fn integrate_checked(
+    start: State,
+    durations: &[f64],
+    jerks: &[f64],
+    lim: &Limits,
+    rel: f64,
+    check_velocity: bool,
+) -> Option<State> {
+    let tv = rel * lim.vmax.abs().max(lim.vmin.abs());
+    let ta = rel * lim.amax.abs().max(lim.amin.abs());
+    let vin = |v: f64| v <= lim.vmax + tv && v >= lim.vmin - tv;
+    let aok = |a: f64| a <= lim.amax + ta && a >= lim.amin - ta;
+    let v_start = start.v;
+    let mut entered = !check_velocity || vin(v_start);
+    let mut vok = |v: f64| {
+        if !check_velocity {
+            return true;
+        }
+        if entered {
+            return vin(v);
+        }
+        if vin(v) {
+            entered = true;
+            return true;
+        }
+        if v_start > lim.vmax {
+            v > lim.vmax && v <= v_start + tv
+        } else {
+            v < lim.vmin && v >= v_start - tv
+        }
+    };
+    if !(aok(start.a) && vok(start.v)) {
+        return None;
+    }
+    let mut s = start;
+    for (&d, &j) in durations.iter().zip(jerks) {
+        if d <= 0.0 {
+            continue;
+        }
+        if j != 0.0 && check_velocity {
+            let tc = -s.a / j;
+            if tc > 0.0 && tc < d && !vok(s.integrate(tc, j).v) {
+                return None;
+            }
+        }
+        s = s.integrate(d, j);
+        if !(aok(s.a) && vok(s.v)) {
+            return None;
+        }
+    }
+    Some(s)
 }
 
 #[cfg(test)]

@@ -32,7 +32,7 @@
 
 use super::limits::{Limits, State};
 use super::poly::{Poly, MAX_DEGREE};
-use super::profile::Profile;
+use super::profile::{integrate_checked, Profile};
 
 /// The sub-shapes of the UDDU family (see module doc).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -183,11 +183,23 @@ fn case_polys(case: Case, pr: &Problem) -> Option<CasePolys> {
             t[0] = a1.sub(&Poly::linear(0.0, a0)).scale(1.0 / j);
             t[2] = xx.scale(1.0 / j);
             t[6] = Poly::linear(0.0, af).sub(&a2).scale(1.0 / j);
-            let hi = (amax - amin) * (1.0 + m);
+            // a1 <= amax and a2 >= amin restrict u to the intersection of two intervals.
+            let d1 = amax * amax - k / 2.0;
+            let d2 = amin * amin + k / 2.0;
+            let w = m * (amax - amin);
+            if d1 < -w * w || d2 < -w * w {
+                return None;
+            }
+            let (s1, s2) = (d1.max(0.0).sqrt(), d2.max(0.0).sqrt());
+            let lo = (amax - s1).max(-amin - s2).max(0.0) - w;
+            let hi = (amax + s1).min(-amin + s2).min(amax - amin) + w;
+            if hi < lo {
+                return None;
+            }
             Some(CasePolys {
                 t,
                 hom: true,
-                lo: 0.0,
+                lo: lo.max(0.0),
                 hi,
             })
         }
@@ -277,9 +289,7 @@ fn validate(pr: &Problem, mut t: [f64; 7], goal: Goal, tol: &Tol) -> Option<Shap
         *ti = ti.max(0.0);
     }
     let start = State::new(0.0, pr.v0, pr.a0);
-    let shape = Shape { t, dir: 1.0 };
-    let prof = shape.profile(start, pr.lim.jmax);
-    let e = prof.end();
+    let e = integrate_checked(start, &t, &pr.jerks(), &pr.lim, 1e-9, true)?;
     if (e.v - pr.vf).abs() > tol.v || (e.a - pr.af).abs() > tol.a {
         return None;
     }
@@ -290,15 +300,12 @@ fn validate(pr: &Problem, mut t: [f64; 7], goal: Goal, tol: &Tol) -> Option<Shap
             }
         }
         Goal::Duration(td) => {
-            if (prof.duration() - td).abs() > tol.t.max(1e-12 * td) {
+            if (t.iter().sum::<f64>() - td).abs() > tol.t.max(1e-12 * td) {
                 return None;
             }
         }
     }
-    if !prof.within_limits(&pr.lim, 1e-9) {
-        return None;
-    }
-    Some(shape)
+    Some(Shape { t, dir: 1.0 })
 }
 
 /// Solves one sub-shape of the UDDU family of `pr` for `goal`; calls `out` with every valid
@@ -497,7 +504,11 @@ pub fn extreme_at(pr: &Problem, dir: f64, td: f64) -> Option<(f64, Shape)> {
     let start = State::new(0.0, frame.v0, frame.a0);
     for case in CASES {
         solve_case(&frame, case, Goal::Duration(td), &mut |s: Shape| {
-            let p = s.profile(start, frame.lim.jmax).end().p;
+            let mut e = start;
+            for (t, j) in s.t.iter().zip(frame.jerks()) {
+                e = e.integrate(*t, j);
+            }
+            let p = e.p;
             if best.is_none_or(|(bp, _)| p > bp) {
                 best = Some((p, s));
             }
