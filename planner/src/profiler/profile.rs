@@ -202,26 +202,47 @@ impl Profile {
     /// sets, so (the dynamics being linear) its state is the combination of both states at
     /// every time. Limits that both respect are respected by the blend (they are convex).
     pub fn blend(a: &Profile, b: &Profile, lambda: f64) -> Profile {
+        // Two pointers over the segments with their *remaining* durations (not cumulative
+        // times): the merged durations of short high-jerk segments stay exact even deep into
+        // a long profile.
         let mut r = Profile::new(a.start());
         let (mut i, mut k) = (0, 0);
-        let mut t = 0.0;
-        let end = a.duration().max(b.duration());
-        while t < end && (i < a.n || k < b.n) {
-            let ta = if i < a.n { a.t0[i + 1] } else { f64::INFINITY };
-            let tb = if k < b.n { b.t0[k + 1] } else { f64::INFINITY };
-            let next = ta.min(tb).min(end);
+        let (mut ra, mut rb) = (a.seg_or_zero(0), b.seg_or_zero(0));
+        while i < a.n || k < b.n {
+            let dt = match (i < a.n, k < b.n) {
+                (true, true) => ra.min(rb),
+                (true, false) => ra,
+                _ => rb,
+            };
             let ja = if i < a.n { a.j[i] } else { 0.0 };
             let jb = if k < b.n { b.j[k] } else { 0.0 };
-            r.push(next - t, lambda * ja + (1.0 - lambda) * jb);
-            t = next;
-            if ta <= next {
-                i += 1;
+            r.push(dt, lambda * ja + (1.0 - lambda) * jb);
+            if i < a.n {
+                if ra <= dt {
+                    i += 1;
+                    ra = a.seg_or_zero(i);
+                } else {
+                    ra -= dt;
+                }
             }
-            if tb <= next {
-                k += 1;
+            if k < b.n {
+                if rb <= dt {
+                    k += 1;
+                    rb = b.seg_or_zero(k);
+                } else {
+                    rb -= dt;
+                }
             }
         }
         r
+    }
+
+    fn seg_or_zero(&self, i: usize) -> f64 {
+        if i < self.n {
+            self.t[i]
+        } else {
+            0.0
+        }
     }
 
     /// The profile with every state and jerk multiplied by `k` (start state included).
