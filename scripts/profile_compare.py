@@ -7,6 +7,10 @@ velocity/acceleration limits respected to 1e-9 relative at every 20 ms sample (a
 pre-trajectory, if any); final state reached to 1e-8. Prints a summary per case set, the exact
 pass rate and the failing case ids; exits non-zero on any failure.
 
+Information only (not checked): for single-DoF position cases, the largest difference between
+our and ruckig's sampled positions (the time-optimal trajectory is unique, so they coincide; for
+synchronised DoFs the profiles legitimately differ).
+
 Binary: $PCR_BIN if set, else `cargo run --release -q --bin pcr --`.
 Usage: profile_compare.py [--seed N] [--scale K] [--keep DIR] [--only SET]
 """
@@ -233,7 +237,9 @@ def solve_ruckig(case):
         return None
     p, v, a = traj.at_time(traj.duration)
     brakes = [traj.profiles[0][i].brake.duration for i in range(d)]
-    return traj.duration, (list(p), list(v), list(a)), brakes
+    n = min(int(math.floor(traj.duration / DT)), 499) + 1
+    samples = [list(traj.at_time(k * DT)[0]) for k in range(n)]
+    return traj.duration, (list(p), list(v), list(a)), brakes, samples
 
 
 def find_binary():
@@ -248,7 +254,7 @@ def check(case, ref, ans):
     if "error" in ans:
         return [f"error: {ans['error']}"]
     fails = []
-    dur_ref, final_ref, brakes = ref
+    dur_ref, final_ref, brakes, _ = ref
     dur = ans["duration"]
     rel = (dur - dur_ref) / max(dur_ref, 1e-9)
     if abs(rel) > DUR_TOL and abs(dur - dur_ref) > 1e-12:
@@ -325,10 +331,11 @@ def main():
 
     total_pass = 0
     failing = []
-    print(f"{'case set':22s} {'cases':>6s} {'passed':>7s} {'max |dT|/T':>12s}")
+    print(f"{'case set':22s} {'cases':>6s} {'passed':>7s} {'max |dT|/T':>12s} {'max |dp| 1-DoF':>15s}")
     for name in sets:
         n = passed = 0
         worst_dt = 0.0
+        worst_dp = -1.0
         for sname, c in cases:
             if sname != name:
                 continue
@@ -338,12 +345,16 @@ def main():
             if "duration" in ans:
                 dref = refs[c["id"]][0]
                 worst_dt = max(worst_dt, abs(ans["duration"] - dref) / max(dref, 1e-9))
+                if c["dofs"] == 1 and c["control_interface"] == "position":
+                    for row, ref_row in zip(ans["p"], refs[c["id"]][3]):
+                        worst_dp = max(worst_dp, abs(row[0] - ref_row[0]))
             if fails:
                 failing.append((c["id"], fails))
             else:
                 passed += 1
         total_pass += passed
-        print(f"{name:22s} {n:6d} {passed:7d} {worst_dt:12.3e}")
+        dp = f"{worst_dp:15.3e}" if worst_dp >= 0 else f"{'-':>15s}"
+        print(f"{name:22s} {n:6d} {passed:7d} {worst_dt:12.3e} {dp}")
     total = len(cases)
     rate = 100.0 * total_pass / max(total, 1)
     print(f"TOTAL: {total_pass}/{total} passed ({rate:.2f} %), "
