@@ -4,7 +4,8 @@
 Generates seeded random case sets, solves them with ruckig and with `pcr profile`, and checks
 for every case: solved; duration equal to ruckig's within 1e-8 relative (never faster);
 velocity/acceleration limits respected to 1e-9 relative at every 20 ms sample (after the brake
-pre-trajectory, if any); final state reached to 1e-8. Prints a summary per case set, the exact
+pre-trajectory, if any); final state reached to 1e-8 (relative to max(1, |value|), and for
+velocity and acceleration also to the limit). Prints a summary per case set, the exact
 pass rate and the failing case ids; exits non-zero on any failure.
 
 Information only (not checked): for single-DoF position cases, the largest difference between
@@ -284,11 +285,18 @@ def check(case, ref, ans):
     if worst > LIM_TOL:
         fails.append(f"limits violated by {worst:.3e} relative")
     ferr = 0.0
+    # Relative to max(1, |value|) for positions, to max(1, velocity / acceleration limit) for
+    # velocities / accelerations (matters only for cases in scaled units).
+    scales = {
+        "p": [1.0] * case["dofs"],
+        "v": [max(lim["vmax"][i], -lim["vmin"][i]) for i in range(case["dofs"])],
+        "a": [max(lim["amax"][i], -lim["amin"][i]) for i in range(case["dofs"])],
+    }
     for key, ref_vals in zip(("p", "v", "a"), final_ref):
         if vel_if and key == "p":
             continue
-        for x, r in zip(ans["final"][key], ref_vals):
-            ferr = max(ferr, abs(x - r) / max(1.0, abs(r)))
+        for x, r, sc in zip(ans["final"][key], ref_vals, scales[key]):
+            ferr = max(ferr, abs(x - r) / max(1.0, abs(r), sc))
     if ferr > FINAL_TOL:
         fails.append(f"final state off by {ferr:.3e}")
     return fails
