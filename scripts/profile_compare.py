@@ -152,6 +152,12 @@ def generate(seed, scale):
                   [rnd_target(rng, lim, i, "rest") for i in range(3)], lim, sync="none")
         for k in range(n(20)) for lim in [rnd_limits(rng, 3, False)]
     ]
+    sets["no_sync"] += [
+        make_case(f"nosync-mindur-{k}", 2, [rnd_state_inside(rng, lim, i) for i in range(2)],
+                  [rnd_target(rng, lim, i, "rest") for i in range(2)], lim, sync="none",
+                  min_dur=rng.uniform(0.5, 8.0))
+        for k in range(n(5)) for lim in [rnd_limits(rng, 2, False)]
+    ]
     sets["minimum_duration"] = [
         make_case(f"mindur-{k}", 2, [rnd_state_inside(rng, lim, i) for i in range(2)],
                   [rnd_target(rng, lim, i, "any") for i in range(2)], lim,

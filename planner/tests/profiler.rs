@@ -367,6 +367,11 @@ fn no_synchronisation_uses_each_optimum() {
     check_invariants(&inp, &traj);
     assert!(traj.profile(1).duration() < traj.profile(0).duration());
     assert_eq!(traj.duration(), traj.profile(0).duration());
+    // A minimum duration only extends the total (as ruckig).
+    inp.minimum_duration = Some(8.0);
+    let traj2 = calculate(&inp).unwrap();
+    assert_eq!(traj2.duration(), 8.0);
+    assert_eq!(traj2.profile(0).duration(), traj.profile(0).duration());
 }
 
 #[test]

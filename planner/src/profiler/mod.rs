@@ -51,7 +51,8 @@ pub enum Synchronization {
     /// otherwise as [`Synchronization::Time`].
     Phase,
     /// Every DoF is time-optimal on its own; it continues with constant acceleration after
-    /// reaching its target.
+    /// reaching its target. The total duration is the longest one (at least the minimum
+    /// duration).
     None,
 }
 
@@ -212,7 +213,8 @@ pub fn calculate(input: &Input) -> Result<Trajectory, ProfileError> {
     let mut profiles = [Profile::new(State::default()); MAX_DOFS];
     if input.synchronization == Synchronization::None || n == 1 && input.minimum_duration.is_none()
     {
-        let mut duration: f64 = 0.0;
+        // As ruckig: with no synchronisation the minimum duration only extends the total.
+        let mut duration: f64 = input.minimum_duration.unwrap_or(0.0);
         for i in 0..n {
             profiles[i] = steps[i].optimal_profile();
             duration = duration.max(profiles[i].duration());
