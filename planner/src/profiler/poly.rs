@@ -7,6 +7,9 @@
 /// Maximal degree a [`Poly`] can hold.
 pub const MAX_DEGREE: usize = 10;
 
+/// Capacity of a root list: simple roots plus (near-)double roots reported at critical points.
+pub const ROOTS_CAP: usize = 2 * MAX_DEGREE + 2;
+
 /// A real polynomial `c[0] + c[1] x + ... + c[deg] x^deg` of degree at most [`MAX_DEGREE`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Poly {
@@ -125,7 +128,7 @@ impl Poly {
     /// precision. A critical point where the value is negligible (a double root) is reported
     /// as a root as well, so that tangential solutions are not lost; callers validate every
     /// root anyway.
-    pub fn roots_in(&self, lo: f64, hi: f64, out: &mut [f64; MAX_DEGREE]) -> usize {
+    pub fn roots_in(&self, lo: f64, hi: f64, out: &mut [f64; ROOTS_CAP]) -> usize {
         let p = self.trimmed();
         if lo > hi || !lo.is_finite() || !hi.is_finite() {
             return 0;
@@ -142,9 +145,9 @@ impl Poly {
                 }
             }
             _ => {
-                let mut crit = [0.0; MAX_DEGREE];
+                let mut crit = [0.0; ROOTS_CAP];
                 let nc = p.deriv().roots_in(lo, hi, &mut crit);
-                let mut pts = [0.0; MAX_DEGREE + 2];
+                let mut pts = [0.0; ROOTS_CAP + 2];
                 pts[0] = lo;
                 pts[1..=nc].copy_from_slice(&crit[..nc]);
                 pts[nc + 1] = hi;
@@ -165,7 +168,7 @@ impl Poly {
                     if *n > 0 && (r - out[*n - 1]).abs() <= 1e-14 * xs {
                         return;
                     }
-                    if *n < MAX_DEGREE {
+                    if *n < ROOTS_CAP {
                         out[*n] = r;
                         *n += 1;
                     }
@@ -244,7 +247,7 @@ mod tests {
     #[test]
     fn finds_all_simple_roots() {
         let p = from_roots(&[-2.0, -0.5, 0.1, 0.3, 1.7, 4.0]);
-        let mut out = [0.0; MAX_DEGREE];
+        let mut out = [0.0; ROOTS_CAP];
         let n = p.roots_in(-10.0, 10.0, &mut out);
         assert_eq!(n, 6);
         for (r, e) in out[..n].iter().zip([-2.0, -0.5, 0.1, 0.3, 1.7, 4.0]) {
@@ -257,7 +260,7 @@ mod tests {
     #[test]
     fn finds_double_root() {
         let p = from_roots(&[1.0, 1.0, 3.0]);
-        let mut out = [0.0; MAX_DEGREE];
+        let mut out = [0.0; ROOTS_CAP];
         let n = p.roots_in(0.0, 2.0, &mut out);
         assert_eq!(n, 1);
         assert!((out[0] - 1.0).abs() < 1e-7);
@@ -266,7 +269,7 @@ mod tests {
     #[test]
     fn no_roots_for_positive_polynomial() {
         let p = Poly::constant(1.0).add(&Poly::x().mul(&Poly::x()));
-        let mut out = [0.0; MAX_DEGREE];
+        let mut out = [0.0; ROOTS_CAP];
         assert_eq!(p.roots_in(-5.0, 5.0, &mut out), 0);
     }
 }

@@ -31,7 +31,7 @@
 //! Every root is turned into a profile and validated (durations >= 0, limits, final state).
 
 use super::limits::{Limits, State};
-use super::poly::{Poly, MAX_DEGREE};
+use super::poly::{Poly, ROOTS_CAP};
 use super::profile::{integrate_checked, Profile};
 
 /// The sub-shapes of the UDDU family (see module doc).
@@ -356,7 +356,7 @@ pub fn solve_case(pr: &Problem, case: Case, goal: Goal, out: &mut impl FnMut(Sha
             tt.sub(&u.scale(td))
         }
     };
-    let mut roots = [0.0; MAX_DEGREE];
+    let mut roots = [0.0; ROOTS_CAP];
     let n = eq.roots_in(cp.lo, cp.hi, &mut roots);
     for &r in &roots[..n] {
         if cp.hom && r <= 0.0 {
