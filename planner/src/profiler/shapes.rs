@@ -203,6 +203,19 @@ fn case_polys(case: Case, pr: &Problem) -> Option<CasePolys> {
                 hi,
             })
         }
+        Case::PlateauAmax | Case::PlateauBoth
+            if v0 + (amax * amax - a0 * a0) / (2.0 * j) > lim.vmax + m * (lim.vmax - lim.vmin) =>
+        {
+            // Reaching amax alone already exceeds vmax (the velocity keeps rising on the
+            // plateau): no such shape.
+            None
+        }
+        Case::PlateauAmin | Case::PlateauBoth
+            if vf - (af * af - amin * amin) / (2.0 * j) < lim.vmin - m * (lim.vmax - lim.vmin) =>
+        {
+            // Mirror: the final ramp up from amin would start below vmin.
+            None
+        }
         Case::PlateauAmax => {
             // parameter: trough a2 = x.
             t[0] = Poly::constant((amax - a0) / j);
