@@ -1,10 +1,13 @@
 //! Step 1 for one DoF: the minimal duration and the set of feasible durations.
 //!
 //! All extremal shapes that reach the target exactly (see `shapes.rs` / `velocity.rs`) are
-//! collected; their durations are the boundaries of the feasible set. The set is then rebuilt by
-//! testing the midpoint of every gap between consecutive boundaries (feasible iff the target
-//! lies within `[Pmin(T), Pmax(T)]`). Beyond the last boundary every duration is feasible.
-//! The gaps that are not feasible are the *blocked intervals*.
+//! collected; their durations are the boundaries of the feasible set, the shortest one is the
+//! time-optimal profile. A duration `T` is feasible iff the target lies within
+//! `[Pmin(T), Pmax(T)]` (fixed-duration extremes); beyond the last boundary every duration is
+//! feasible. [`Step1::feasible_intervals`] rebuilds the whole set by testing the midpoint of every
+//! gap between consecutive boundaries (the gaps that are not feasible are the *blocked
+//! intervals*); synchronisation tests its candidate durations directly with
+//! [`Step1::is_feasible`].
 
 use super::brake::{position_brake, velocity_brake};
 use super::limits::{Limits, State};
