@@ -79,6 +79,7 @@ pub struct Setpoint {
 struct Active {
     path: Path,
     profile: SpeedProfile,
+    limits: SpeedLimits,
     /// Time in the motion, s.
     t: f64,
 }
@@ -95,7 +96,7 @@ struct Stop {
 /// The 20 ms setpoint generator.
 #[derive(Clone, Debug)]
 pub struct Interpolator {
-    queue: [Option<(Path, SpeedProfile)>; QUEUE_CAPACITY],
+    queue: [Option<(Path, SpeedProfile, SpeedLimits)>; QUEUE_CAPACITY],
     head: usize,
     len: usize,
     active: Option<Active>,
@@ -146,7 +147,7 @@ impl Interpolator {
             });
         }
         let profile = SpeedProfile::plan(cmd.path.length(), &cmd.limits)?;
-        self.queue[(self.head + self.len) % QUEUE_CAPACITY] = Some((cmd.path, profile));
+        self.queue[(self.head + self.len) % QUEUE_CAPACITY] = Some((cmd.path, profile, cmd.limits));
         self.len += 1;
         self.tail = cmd.path.end();
         Ok(())
@@ -162,7 +163,7 @@ impl Interpolator {
         self.active.is_none() && self.stop.is_none() && self.len == 0
     }
 
-    fn pop(&mut self) -> Option<(Path, SpeedProfile)> {
+    fn pop(&mut self) -> Option<(Path, SpeedProfile, SpeedLimits)> {
         if self.len == 0 {
             return None;
         }
@@ -172,8 +173,11 @@ impl Interpolator {
         item
     }
 
-    /// Requests a jerk-limited stop: the current motion brakes along its path as fast as the
-    /// stop limits allow (never past its end), and the queue is cleared.
+    /// Requests a stop: the queue is cleared and the current motion brakes along its path as
+    /// fast as the stop limits allow (jerk-limited for jerk-limited motions, with at least the
+    /// motion's own jerk; at once for trapezoidal ones). If that brake would have to reverse
+    /// (the motion is already decelerating hard) or would run past the path end, the motion's
+    /// own planned deceleration to its path end is kept instead.
     pub fn request_stop(&mut self) {
         self.len = 0;
         self.head = 0;
@@ -181,28 +185,61 @@ impl Interpolator {
         if self.stop.is_some() {
             return;
         }
-        if let Some(act) = self.active.take() {
+        if let Some(act) = self.active {
             let st = act.profile.at(act.t);
-            let mut lim = self.stop_limits;
-            // Keep the current acceleration admissible for the brake.
-            lim.amax = lim.amax.max(st.a.abs());
-            lim.amin = -lim.amax;
-            let profile = Step1::solve(
-                ControlInterface::Velocity,
-                &State::new(0.0, st.v, st.a),
-                &State::new(0.0, 0.0, 0.0),
-                &lim,
-            )
-            .map(|s| s.optimal_profile())
-            .unwrap_or_else(|| Profile::new(State::default()));
-            self.stop = Some(Stop {
-                path: act.path,
-                s0: st.p,
-                profile,
-                t: 0.0,
-            });
+            let profile = match act.profile {
+                SpeedProfile::Trapezoidal { a, .. } => {
+                    // Same (infinite-jerk) model as the motion: decelerate at once.
+                    let dec = self.stop_limits.amax.max(a);
+                    let mut p = Profile::new(State::new(0.0, st.v, -dec));
+                    p.push(st.v / dec, 0.0);
+                    p
+                }
+                SpeedProfile::JerkLimited(_) => {
+                    let mut lim = self.stop_limits;
+                    // Brake at least as hard as the motion itself may, and keep the current
+                    // acceleration admissible.
+                    if let SpeedLimits::JerkLimited { jmax, .. } = act.limits {
+                        lim.jmax = lim.jmax.max(jmax);
+                    }
+                    lim.amax = lim.amax.max(st.a.abs());
+                    lim.amin = -lim.amax;
+                    Step1::solve(
+                        ControlInterface::Velocity,
+                        &State::new(0.0, st.v, st.a),
+                        &State::new(0.0, 0.0, 0.0),
+                        &lim,
+                    )
+                    .map(|s| s.optimal_profile())
+                    .unwrap_or_else(|| Profile::new(State::default()))
+                }
+            };
+            // A brake that would have to reverse (already decelerating hard) or would run past
+            // the path end is not better than the planned deceleration: keep the motion, which
+            // stops at its path end (the queue is cleared).
+            let (mut vmin, mut t) = (0.0f64, 0.0);
+            for i in 0..profile.len() {
+                t += profile.segment(i).0;
+                vmin = vmin.min(profile.at(t).0.v);
+            }
+            let reverses =
+                vmin < -1e-9 * st.v.abs().max(1e-9) || profile.position_extrema().min < -1e-12;
+            let overruns = st.p + profile.end().p > act.path.length();
+            if !(reverses || overruns) {
+                self.active = None;
+                self.stop = Some(Stop {
+                    path: act.path,
+                    s0: st.p,
+                    profile,
+                    t: 0.0,
+                });
+            }
         }
-        self.tail = self.hold;
+        self.tail = if self.stop.is_some() {
+            self.hold
+        } else {
+            self.active.map_or(self.hold, |a| a.path.end())
+        };
     }
 
     /// Advances one cycle ([`CYCLE_S`]) and returns the setpoint for its end.
@@ -236,9 +273,10 @@ impl Interpolator {
             let mut act = match self.active {
                 Some(a) => a,
                 None => match self.pop() {
-                    Some((path, profile)) => Active {
+                    Some((path, profile, limits)) => Active {
                         path,
                         profile,
+                        limits,
                         t: 0.0,
                     },
                     None => {
@@ -407,5 +445,76 @@ mod tests {
             limits: jl(),
         })
         .unwrap();
+    }
+
+    #[test]
+    fn random_commands_and_stops_stay_smooth() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        for _ in 0..20 {
+            let mut ip = Interpolator::new(Pose::default(), 80.0, 800.0).unwrap();
+            let mut here = Pose::default();
+            let vmax = 15.0;
+            for _ in 0..4 {
+                let path = match rng.random_range(0..3) {
+                    0 => {
+                        let to = Pose::new(
+                            rng.random_range(-20.0..20.0),
+                            rng.random_range(-20.0..20.0),
+                            rng.random_range(-0.3..0.3),
+                        );
+                        Path::line(here, to).unwrap()
+                    }
+                    1 => {
+                        let r = rng.random_range(2.0..10.0);
+                        let th: f64 = rng.random_range(-3.0..3.0);
+                        let (cx, cy) = (here.x - r * th.cos(), here.y - r * th.sin());
+                        let sweep = rng.random_range(-4.0..4.0);
+                        Path::arc(cx, cy, r, th, sweep, here.phi, here.phi + 0.1).unwrap()
+                    }
+                    _ => Path::rectangle(here, 5.0, 3.0, rng.random_range(0.0..1.0)).unwrap(),
+                };
+                let limits = if rng.random_bool(0.5) {
+                    SpeedLimits::JerkLimited {
+                        vmax,
+                        amax: 60.0,
+                        jmax: 600.0,
+                    }
+                } else {
+                    SpeedLimits::Trapezoidal { vmax, amax: 60.0 }
+                };
+                ip.push(MotionCommand { path, limits }).unwrap();
+                here = path.end();
+            }
+            let stop_at = rng.random_range(10..400);
+            let mut last = Pose::default();
+            let mut stopped = false;
+            for k in 0..20_000 {
+                if k == stop_at {
+                    ip.request_stop();
+                    stopped = true;
+                }
+                let sp = ip.step();
+                assert!(
+                    sp.speed <= vmax * (1.0 + 1e-9) && sp.speed >= -1e-9,
+                    "speed {} phase {:?} k {k} stop {stop_at}",
+                    sp.speed,
+                    sp.phase
+                );
+                let d = ((sp.pose.x - last.x).powi(2)
+                    + (sp.pose.y - last.y).powi(2)
+                    + (50.0 * (sp.pose.phi - last.phi)).powi(2))
+                .sqrt();
+                assert!(d <= vmax * CYCLE_S * (1.0 + 1e-9) + 1e-9, "jump {d}");
+                last = sp.pose;
+                if sp.phase == Phase::Idle && (stopped || ip.is_idle()) && k > stop_at {
+                    break;
+                }
+            }
+            assert!(ip.is_idle());
+            if !stopped {
+                assert!(last.max_diff(&here) < 1e-9);
+            }
+        }
     }
 }
