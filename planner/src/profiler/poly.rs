@@ -1,0 +1,275 @@
+//! Small fixed-capacity real polynomials and a robust real-root finder on an interval.
+//!
+//! The profile shapes are solved by building, at run time, the polynomial equation of one shape
+//! parameter (see `shapes.rs`) and isolating all of its real roots in the parameter's admissible
+//! interval. No allocation: coefficients live in a fixed array.
+
+/// Maximal degree a [`Poly`] can hold.
+pub const MAX_DEGREE: usize = 10;
+
+/// Capacity of a root list: simple roots plus (near-)double roots reported at critical points.
+pub const ROOTS_CAP: usize = 2 * MAX_DEGREE + 2;
+
+/// A real polynomial `c[0] + c[1] x + ... + c[deg] x^deg` of degree at most [`MAX_DEGREE`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Poly {
+    /// Coefficients, lowest degree first; entries above `deg` are zero.
+    pub c: [f64; MAX_DEGREE + 1],
+    /// Formal degree (the leading coefficient may be zero).
+    pub deg: usize,
+}
+
+impl Poly {
+    /// The constant polynomial `k`.
+    pub fn constant(k: f64) -> Self {
+        let mut c = [0.0; MAX_DEGREE + 1];
+        c[0] = k;
+        Poly { c, deg: 0 }
+    }
+
+    /// The polynomial `c0 + c1 x`.
+    pub fn linear(c0: f64, c1: f64) -> Self {
+        let mut p = Self::constant(c0);
+        p.c[1] = c1;
+        p.deg = 1;
+        p
+    }
+
+    /// The identity polynomial `x`.
+    pub fn x() -> Self {
+        Self::linear(0.0, 1.0)
+    }
+
+    /// Sum.
+    pub fn add(&self, o: &Poly) -> Poly {
+        let mut r = *self;
+        r.deg = self.deg.max(o.deg);
+        for i in 0..=o.deg {
+            r.c[i] += o.c[i];
+        }
+        r
+    }
+
+    /// Difference.
+    pub fn sub(&self, o: &Poly) -> Poly {
+        self.add(&o.scale(-1.0))
+    }
+
+    /// Product with a scalar.
+    pub fn scale(&self, k: f64) -> Poly {
+        let mut r = *self;
+        for v in r.c.iter_mut() {
+            *v *= k;
+        }
+        r
+    }
+
+    /// Sum with a scalar.
+    pub fn add_const(&self, k: f64) -> Poly {
+        let mut r = *self;
+        r.c[0] += k;
+        r
+    }
+
+    /// Product. Panics in debug builds if the degree would exceed [`MAX_DEGREE`]
+    /// (all products in this crate stay below it by construction).
+    pub fn mul(&self, o: &Poly) -> Poly {
+        debug_assert!(self.deg + o.deg <= MAX_DEGREE);
+        let mut r = Poly::constant(0.0);
+        r.deg = (self.deg + o.deg).min(MAX_DEGREE);
+        for i in 0..=self.deg {
+            if self.c[i] == 0.0 {
+                continue;
+            }
+            for j in 0..=o.deg {
+                if i + j <= MAX_DEGREE {
+                    r.c[i + j] += self.c[i] * o.c[j];
+                }
+            }
+        }
+        r
+    }
+
+    /// Value at `x` (Horner).
+    pub fn eval(&self, x: f64) -> f64 {
+        let mut acc = 0.0;
+        for i in (0..=self.deg).rev() {
+            acc = acc * x + self.c[i];
+        }
+        acc
+    }
+
+    /// Derivative.
+    pub fn deriv(&self) -> Poly {
+        let mut r = Poly::constant(0.0);
+        if self.deg == 0 {
+            return r;
+        }
+        r.deg = self.deg - 1;
+        for i in 1..=self.deg {
+            r.c[i - 1] = self.c[i] * i as f64;
+        }
+        r
+    }
+
+    /// Degree after dropping leading coefficients that are exactly zero.
+    fn trimmed(&self) -> Poly {
+        let mut r = *self;
+        while r.deg > 0 && r.c[r.deg] == 0.0 {
+            r.deg -= 1;
+        }
+        r
+    }
+
+    /// All real roots in `[lo, hi]`, ascending, written into `out`; returns their count.
+    ///
+    /// The interval is split at the roots of the derivative (found recursively) into pieces on
+    /// which the polynomial is monotone; each piece with a sign change is bisected to full
+    /// precision. A critical point where the value is negligible (a double root) is reported
+    /// as a root as well, so that tangential solutions are not lost; callers validate every
+    /// root anyway.
+    pub fn roots_in(&self, lo: f64, hi: f64, out: &mut [f64; ROOTS_CAP]) -> usize {
+        let p = self.trimmed();
+        if lo > hi || !lo.is_finite() || !hi.is_finite() {
+            return 0;
+        }
+        match p.deg {
+            0 => 0,
+            1 => {
+                let r = -p.c[0] / p.c[1];
+                if r >= lo && r <= hi {
+                    out[0] = r;
+                    1
+                } else {
+                    0
+                }
+            }
+            _ => {
+                let mut crit = [0.0; ROOTS_CAP];
+                let nc = p.deriv().roots_in(lo, hi, &mut crit);
+                let mut pts = [0.0; ROOTS_CAP + 2];
+                pts[0] = lo;
+                pts[1..=nc].copy_from_slice(&crit[..nc]);
+                pts[nc + 1] = hi;
+                let npts = nc + 2;
+                // "Negligible" value at x: the rounding-error scale of evaluating p there.
+                let tiny_at = |x: f64| {
+                    let mut mag = 0.0f64;
+                    let mut xp = 1.0;
+                    for i in 0..=p.deg {
+                        mag += (p.c[i] * xp).abs();
+                        xp *= x.abs();
+                    }
+                    mag * 1e-13
+                };
+                let xs = lo.abs().max(hi.abs()).max(1e-300);
+                let mut n = 0;
+                let mut push = |r: f64, n: &mut usize| {
+                    if *n > 0 && (r - out[*n - 1]).abs() <= 1e-14 * xs {
+                        return;
+                    }
+                    if *n < ROOTS_CAP {
+                        out[*n] = r;
+                        *n += 1;
+                    }
+                };
+                for k in 0..npts - 1 {
+                    let (a, b) = (pts[k], pts[k + 1]);
+                    let (fa, fb) = (p.eval(a), p.eval(b));
+                    if fa == 0.0 {
+                        push(a, &mut n);
+                        continue;
+                    }
+                    if k > 0 && fa.abs() <= tiny_at(a) {
+                        // Possibly a double root at a critical point; keep looking for a
+                        // sign change in the piece as well.
+                        push(a, &mut n);
+                    }
+                    if fa.signum() != fb.signum() && fb != 0.0 {
+                        push(bisect(&p, a, b, fa), &mut n);
+                    }
+                }
+                let fh = p.eval(hi);
+                if fh == 0.0 {
+                    push(hi, &mut n);
+                }
+                n
+            }
+        }
+    }
+}
+
+/// Safeguarded Newton iteration on a bracket `[a, b]` where `p(a)` has the sign of `fa` and
+/// `p(b)` the opposite sign: Newton steps while they stay inside the shrinking bracket, bisection
+/// otherwise; converges to (nearly) adjacent floating point numbers.
+fn bisect(p: &Poly, mut a: f64, mut b: f64, fa: f64) -> f64 {
+    let dp = p.deriv();
+    let sa = fa.signum();
+    let mut x = 0.5 * (a + b);
+    for _ in 0..100 {
+        let fx = p.eval(x);
+        if fx == 0.0 {
+            return x;
+        }
+        if fx.signum() == sa {
+            a = x;
+        } else {
+            b = x;
+        }
+        let d = dp.eval(x);
+        let newton = x - fx / d;
+        let (lo, hi) = (a.min(b), a.max(b));
+        let next = if d != 0.0 && newton > lo && newton < hi {
+            newton
+        } else {
+            0.5 * (a + b)
+        };
+        if (next - x).abs() <= 4.0 * f64::EPSILON * x.abs().max(f64::MIN_POSITIVE)
+            || (hi - lo) <= 4.0 * f64::EPSILON * lo.abs().max(hi.abs())
+        {
+            return next;
+        }
+        x = next;
+    }
+    x
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn from_roots(rs: &[f64]) -> Poly {
+        rs.iter().fold(Poly::constant(1.0), |acc, r| {
+            acc.mul(&Poly::linear(-r, 1.0))
+        })
+    }
+
+    #[test]
+    fn finds_all_simple_roots() {
+        let p = from_roots(&[-2.0, -0.5, 0.1, 0.3, 1.7, 4.0]);
+        let mut out = [0.0; ROOTS_CAP];
+        let n = p.roots_in(-10.0, 10.0, &mut out);
+        assert_eq!(n, 6);
+        for (r, e) in out[..n].iter().zip([-2.0, -0.5, 0.1, 0.3, 1.7, 4.0]) {
+            assert!((r - e).abs() < 1e-12, "{r} vs {e}");
+        }
+        let n = p.roots_in(0.0, 1.0, &mut out);
+        assert_eq!(n, 2);
+    }
+
+    #[test]
+    fn finds_double_root() {
+        let p = from_roots(&[1.0, 1.0, 3.0]);
+        let mut out = [0.0; ROOTS_CAP];
+        let n = p.roots_in(0.0, 2.0, &mut out);
+        assert_eq!(n, 1);
+        assert!((out[0] - 1.0).abs() < 1e-7);
+    }
+
+    #[test]
+    fn no_roots_for_positive_polynomial() {
+        let p = Poly::constant(1.0).add(&Poly::x().mul(&Poly::x()));
+        let mut out = [0.0; ROOTS_CAP];
+        assert_eq!(p.roots_in(-5.0, 5.0, &mut out), 0);
+    }
+}

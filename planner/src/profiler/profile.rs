@@ -1,0 +1,382 @@
+//! A one-DoF jerk profile: a start state followed by segments of constant jerk.
+//!
+//! Fixed capacity, `Copy`, no allocation. After its last segment the profile continues with
+//! zero jerk (constant acceleration), which is what is evaluated past the duration.
+
+use super::limits::{Limits, State};
+
+/// Maximal number of constant-jerk segments of a [`Profile`] (brake 2 + blend of two 7-phase
+/// profiles 14, with margin).
+pub const MAX_SEGMENTS: usize = 24;
+
+/// Piecewise-constant-jerk trajectory of one degree of freedom.
+#[derive(Clone, Copy, Debug)]
+pub struct Profile {
+    n: usize,
+    /// Segment durations in s.
+    t: [f64; MAX_SEGMENTS],
+    /// Segment jerks in u/s^3.
+    j: [f64; MAX_SEGMENTS],
+    /// State at the start of each segment; `s[n]` is the final state.
+    s: [State; MAX_SEGMENTS + 1],
+    /// Start time of each segment in s; `t0[n]` is the duration.
+    t0: [f64; MAX_SEGMENTS + 1],
+}
+
+/// Position extrema of one DoF over a time interval.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PositionExtrema {
+    /// Minimal position in u.
+    pub min: f64,
+    /// Time of the minimal position in s.
+    pub t_min: f64,
+    /// Maximal position in u.
+    pub max: f64,
+    /// Time of the maximal position in s.
+    pub t_max: f64,
+}
+
+impl Profile {
+    /// An empty profile (duration 0) starting (and ending) at `start`.
+    pub fn new(start: State) -> Self {
+        Profile {
+            n: 0,
+            t: [0.0; MAX_SEGMENTS],
+            j: [0.0; MAX_SEGMENTS],
+            s: [start; MAX_SEGMENTS + 1],
+            t0: [0.0; MAX_SEGMENTS + 1],
+        }
+    }
+
+    /// Appends a segment of `dur` seconds at jerk `jerk`. Non-positive durations are skipped.
+    /// Returns false if the capacity is exhausted.
+    pub fn push(&mut self, dur: f64, jerk: f64) -> bool {
+        if dur <= 0.0 {
+            return true;
+        }
+        if self.n >= MAX_SEGMENTS {
+            return false;
+        }
+        let i = self.n;
+        self.t[i] = dur;
+        self.j[i] = jerk;
+        self.s[i + 1] = self.s[i].integrate(dur, jerk);
+        self.t0[i + 1] = self.t0[i] + dur;
+        self.n += 1;
+        true
+    }
+
+    /// Appends all segments of `other` (whose start state is assumed to equal this end state).
+    pub fn append(&mut self, other: &Profile) -> bool {
+        (0..other.n).all(|i| self.push(other.t[i], other.j[i]))
+    }
+
+    /// Number of segments.
+    pub fn len(&self) -> usize {
+        self.n
+    }
+
+    /// True if the profile has no segment.
+    pub fn is_empty(&self) -> bool {
+        self.n == 0
+    }
+
+    /// Segment `i` as (duration s, jerk u/s^3).
+    pub fn segment(&self, i: usize) -> (f64, f64) {
+        (self.t[i], self.j[i])
+    }
+
+    /// Duration in s.
+    pub fn duration(&self) -> f64 {
+        self.t0[self.n]
+    }
+
+    /// Start state.
+    pub fn start(&self) -> State {
+        self.s[0]
+    }
+
+    /// Final state (at [`Profile::duration`]).
+    pub fn end(&self) -> State {
+        self.s[self.n]
+    }
+
+    /// State and jerk at time `t` (s). Before 0 the start state is returned; after the
+    /// duration the profile continues with zero jerk.
+    pub fn at(&self, t: f64) -> (State, f64) {
+        if t <= 0.0 {
+            return (self.s[0], if self.n > 0 { self.j[0] } else { 0.0 });
+        }
+        if t >= self.t0[self.n] {
+            return (self.s[self.n].integrate(t - self.t0[self.n], 0.0), 0.0);
+        }
+        // Binary search of the segment containing t.
+        let (mut lo, mut hi) = (0, self.n);
+        while hi - lo > 1 {
+            let mid = (lo + hi) / 2;
+            if self.t0[mid] <= t {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        (
+            self.s[lo].integrate(t - self.t0[lo], self.j[lo]),
+            self.j[lo],
+        )
+    }
+
+    /// True if velocity and acceleration stay within `lim` (widened by `rel` times the limit
+    /// magnitudes) over the whole profile, checking segment ends and interior velocity extrema.
+    pub fn within_limits(&self, lim: &Limits, rel: f64) -> bool {
+        self.within_limits_from(0, lim, rel, true)
+    }
+
+    /// Like [`Profile::within_limits`] from segment `first` on; `check_velocity = false` checks
+    /// the acceleration only (velocity interface).
+    pub fn within_limits_from(
+        &self,
+        first: usize,
+        lim: &Limits,
+        rel: f64,
+        check_velocity: bool,
+    ) -> bool {
+        if first >= self.n {
+            return true;
+        }
+        integrate_checked(
+            self.s[first],
+            &self.t[first..self.n],
+            &self.j[first..self.n],
+            lim,
+            rel,
+            check_velocity,
+        )
+        .is_some()
+    }
+
+    /// Position extrema over `[0, duration]`.
+    pub fn position_extrema(&self) -> PositionExtrema {
+        let s0 = self.s[0];
+        let mut ex = PositionExtrema {
+            min: s0.p,
+            t_min: 0.0,
+            max: s0.p,
+            t_max: 0.0,
+        };
+        let mut see = |p: f64, t: f64| {
+            if p < ex.min {
+                ex.min = p;
+                ex.t_min = t;
+            }
+            if p > ex.max {
+                ex.max = p;
+                ex.t_max = t;
+            }
+        };
+        for i in 0..self.n {
+            let (s, j, d) = (self.s[i], self.j[i], self.t[i]);
+            // v(t) = s.v + s.a t + j t^2 / 2 = 0
+            let mut roots = [f64::NAN; 2];
+            if j.abs() > 0.0 {
+                let disc = s.a * s.a - 2.0 * j * s.v;
+                if disc >= 0.0 {
+                    let sq = disc.sqrt();
+                    roots = [(-s.a + sq) / j, (-s.a - sq) / j];
+                }
+            } else if s.a != 0.0 {
+                roots[0] = -s.v / s.a;
+            }
+            for r in roots {
+                if r > 0.0 && r < d {
+                    see(s.integrate(r, j).p, self.t0[i] + r);
+                }
+            }
+            see(self.s[i + 1].p, self.t0[i + 1]);
+        }
+        ex
+    }
+
+    /// The convex combination `lambda * a + (1 - lambda) * b` of two profiles with the same
+    /// start state: its jerk is the combination of the jerks on the union of both breakpoint
+    /// sets, so (the dynamics being linear) its state is the combination of both states at
+    /// every time. Limits that both respect are respected by the blend (they are convex).
+    pub fn blend(a: &Profile, b: &Profile, lambda: f64) -> Profile {
+        // Two pointers over the segments with their *remaining* durations (not cumulative
+        // times): the merged durations of short high-jerk segments stay exact even deep into
+        // a long profile.
+        let mut r = Profile::new(a.start());
+        let (mut i, mut k) = (0, 0);
+        let (mut ra, mut rb) = (a.seg_or_zero(0), b.seg_or_zero(0));
+        while i < a.n || k < b.n {
+            let dt = match (i < a.n, k < b.n) {
+                (true, true) => ra.min(rb),
+                (true, false) => ra,
+                _ => rb,
+            };
+            let ja = if i < a.n { a.j[i] } else { 0.0 };
+            let jb = if k < b.n { b.j[k] } else { 0.0 };
+            r.push(dt, lambda * ja + (1.0 - lambda) * jb);
+            if i < a.n {
+                if ra <= dt {
+                    i += 1;
+                    ra = a.seg_or_zero(i);
+                } else {
+                    ra -= dt;
+                }
+            }
+            if k < b.n {
+                if rb <= dt {
+                    k += 1;
+                    rb = b.seg_or_zero(k);
+                } else {
+                    rb -= dt;
+                }
+            }
+        }
+        r
+    }
+
+    fn seg_or_zero(&self, i: usize) -> f64 {
+        if i < self.n {
+            self.t[i]
+        } else {
+            0.0
+        }
+    }
+
+    /// The profile with every state and jerk multiplied by `k` (start state included).
+    pub fn scaled(&self, k: f64) -> Profile {
+        let s = self.s[0];
+        let mut r = Profile::new(State::new(s.p * k, s.v * k, s.a * k));
+        for i in 0..self.n {
+            r.push(self.t[i], self.j[i] * k);
+        }
+        r
+    }
+
+    /// Same profile with the start position replaced by `p0` (positions shifted).
+    pub fn with_start_position(&self, p0: f64) -> Profile {
+        let s = self.s[0];
+        let mut r = Profile::new(State::new(p0, s.v, s.a));
+        for i in 0..self.n {
+            r.push(self.t[i], self.j[i]);
+        }
+        r
+    }
+
+    /// The mirrored profile (all states and jerks negated).
+    pub fn neg(&self) -> Profile {
+        self.scaled(-1.0)
+    }
+}
+
+/// Integrates constant-jerk segments (`durations` s, `jerks` u/s^3) from `start` and checks the
+/// limits on the way (segment ends and interior velocity extrema, widened by `rel` times the limit
+/// magnitudes; `check_velocity = false` checks the acceleration only). Returns the final state, or
+/// None if a limit is violated. No profile is built (used by the shape solvers' validation).
+///
+/// A start velocity outside the limits (left by a brake pre-trajectory) is tolerated until the
+/// velocity first enters the limits, as long as it stays on the side of the start and does not
+/// move further out.
+pub fn integrate_checked(
+    start: State,
+    durations: &[f64],
+    jerks: &[f64],
+    lim: &Limits,
+    rel: f64,
+    check_velocity: bool,
+) -> Option<State> {
+    let tv = rel * lim.vmax.abs().max(lim.vmin.abs());
+    let ta = rel * lim.amax.abs().max(lim.amin.abs());
+    let vin = |v: f64| v <= lim.vmax + tv && v >= lim.vmin - tv;
+    let aok = |a: f64| a <= lim.amax + ta && a >= lim.amin - ta;
+    let v_start = start.v;
+    let mut entered = !check_velocity || vin(v_start);
+    let mut vok = |v: f64| {
+        if !check_velocity {
+            return true;
+        }
+        if entered {
+            return vin(v);
+        }
+        if vin(v) {
+            entered = true;
+            return true;
+        }
+        if v_start > lim.vmax {
+            v > lim.vmax && v <= v_start + tv
+        } else {
+            v < lim.vmin && v >= v_start - tv
+        }
+    };
+    if !(aok(start.a) && vok(start.v)) {
+        return None;
+    }
+    let mut s = start;
+    for (&d, &j) in durations.iter().zip(jerks) {
+        if d <= 0.0 {
+            continue;
+        }
+        if j != 0.0 && check_velocity {
+            let tc = -s.a / j;
+            if tc > 0.0 && tc < d && !vok(s.integrate(tc, j).v) {
+                return None;
+            }
+        }
+        s = s.integrate(d, j);
+        if !(aok(s.a) && vok(s.v)) {
+            return None;
+        }
+    }
+    Some(s)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn integrates_segments_and_extrapolates() {
+        let mut p = Profile::new(State::new(0.0, 0.0, 0.0));
+        p.push(1.0, 1.0);
+        p.push(1.0, -1.0);
+        assert_eq!(p.len(), 2);
+        let e = p.end();
+        assert!((e.a).abs() < 1e-15 && (e.v - 1.0).abs() < 1e-15 && (e.p - 1.0).abs() < 1e-15);
+        let (s, j) = p.at(3.0);
+        assert_eq!(j, 0.0);
+        assert!((s.p - 2.0).abs() < 1e-15);
+        let (s, _) = p.at(0.5);
+        assert!((s.a - 0.5).abs() < 1e-15);
+    }
+
+    #[test]
+    fn blend_is_convex_combination() {
+        let mut a = Profile::new(State::new(0.0, 0.0, 0.0));
+        a.push(1.0, 1.0);
+        a.push(2.0, -1.0);
+        let mut b = Profile::new(State::new(0.0, 0.0, 0.0));
+        b.push(2.5, -0.5);
+        b.push(0.5, 0.3);
+        let m = Profile::blend(&a, &b, 0.25);
+        for k in 0..=30 {
+            let t = k as f64 * 0.1;
+            let (sa, _) = a.at(t);
+            let (sb, _) = b.at(t);
+            let (sm, _) = m.at(t);
+            assert!((sm.p - (0.25 * sa.p + 0.75 * sb.p)).abs() < 1e-12);
+            assert!((sm.v - (0.25 * sa.v + 0.75 * sb.v)).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn extrema_inside_segment() {
+        let mut p = Profile::new(State::new(0.0, 1.0, 0.0));
+        p.push(2.0, -1.0); // v = 1 - t^2/2 -> zero at sqrt(2)
+        let ex = p.position_extrema();
+        let t = 2f64.sqrt();
+        assert!((ex.t_max - t).abs() < 1e-12);
+        assert!((ex.max - (t - t * t * t / 6.0)).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,659 @@
+//! The extremal profile shapes of one DoF and their solvers.
+//!
+//! For a fixed duration `T`, the trajectories from the start state to the target velocity and
+//! acceleration form a convex set (linear dynamics, convex jerk/acceleration/velocity bounds),
+//! so the reachable final positions are an interval `[Pmin(T), Pmax(T)]`. By Pontryagin's
+//! principle the position-maximising trajectory has jerk `+j, -j, +j` (costate quadratic in
+//! time), with plateaus inserted where a limit is active: the **UDDU** shape
+//!
+//! | phase | 1 | 2 | 3 | 4 | 5 | 6 | 7 |
+//! |---|---|---|---|---|---|---|---|
+//! | jerk | +jmax | 0 (a = amax) | -jmax | 0 (v = vmax, a = 0) | -jmax | 0 (a = amin) | +jmax |
+//!
+//! and the minimising one is its mirror (**DUUD**), obtained by solving the mirrored problem.
+//! The time-optimal profile ends exactly on the boundary of that interval, so it is one of these
+//! shapes; so is every boundary of a blocked duration interval.
+//!
+//! Which plateaus exist gives five sub-shapes; each is a one-parameter family (the parameter is
+//! the duration, or equivalently one acceleration or plateau length):
+//!
+//! * [`Case::Ramps`] no plateau: peak `a1`, trough `a2`; parameter `u = a1 - a2` (all phase
+//!   durations are then rational in `u`, handled by homogenising with powers of `u`);
+//! * [`Case::PlateauAmax`] `a1 = amax`, parameter the trough `a2`;
+//! * [`Case::PlateauAmin`] `a2 = amin`, parameter the peak `a1`;
+//! * [`Case::PlateauBoth`] both, parameter the `amax` plateau length;
+//! * [`Case::PlateauVmax`] cruise at `vmax` (closed form, position linear in the cruise length).
+//!
+//! For each of the first four, the durations are polynomials in the parameter, the final
+//! position is a polynomial built by symbolic integration, and "final position = target" (step
+//! 1) or "duration = T" (fixed duration) is solved for all real roots in the admissible range.
+//!
+//! Every root is turned into a profile and validated (durations >= 0, limits, final state).
+
+use super::limits::{Limits, State};
+use super::poly::{Poly, ROOTS_CAP};
+use super::profile::{integrate_checked, Profile};
+
+/// The sub-shapes of the UDDU family (see module doc).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Case {
+    /// No plateau.
+    Ramps,
+    /// Acceleration plateau at `amax`.
+    PlateauAmax,
+    /// Acceleration plateau at `amin`.
+    PlateauAmin,
+    /// Plateaus at `amax` and `amin`.
+    PlateauBoth,
+    /// Velocity plateau at `vmax` (with or without acceleration plateaus).
+    PlateauVmax,
+}
+
+/// All sub-shapes.
+pub const CASES: [Case; 5] = [
+    Case::Ramps,
+    Case::PlateauAmax,
+    Case::PlateauAmin,
+    Case::PlateauBoth,
+    Case::PlateauVmax,
+];
+
+/// One DoF's problem in a frame where the shape is UDDU (the DUUD shapes are solved on the
+/// mirrored problem). Positions relative to the start.
+#[derive(Clone, Copy, Debug)]
+pub struct Problem {
+    /// Start state (position ignored: 0).
+    pub v0: f64,
+    /// Start acceleration.
+    pub a0: f64,
+    /// Target displacement `pf - p0`.
+    pub d: f64,
+    /// Target velocity.
+    pub vf: f64,
+    /// Target acceleration.
+    pub af: f64,
+    /// Limits.
+    pub lim: Limits,
+}
+
+impl Problem {
+    /// Problem from absolute start and target states.
+    pub fn new(start: &State, target: &State, lim: &Limits) -> Self {
+        Problem {
+            v0: start.v,
+            a0: start.a,
+            d: target.p - start.p,
+            vf: target.v,
+            af: target.a,
+            lim: *lim,
+        }
+    }
+
+    /// The mirrored problem (positions negated, limits swapped).
+    pub fn mirrored(&self) -> Self {
+        Problem {
+            v0: -self.v0,
+            a0: -self.a0,
+            d: -self.d,
+            vf: -self.vf,
+            af: -self.af,
+            lim: self.lim.mirrored(),
+        }
+    }
+
+    /// Jerks of the seven UDDU phases.
+    fn jerks(&self) -> [f64; 7] {
+        let j = self.lim.jmax;
+        [j, 0.0, -j, 0.0, -j, 0.0, j]
+    }
+}
+
+/// A solved 7-phase shape: phase durations (s) in the UDDU frame `dir = 1` or mirrored
+/// (DUUD, `dir = -1`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Shape {
+    /// Phase durations in s.
+    pub t: [f64; 7],
+    /// +1 for UDDU, -1 for DUUD.
+    pub dir: f64,
+}
+
+impl Shape {
+    /// Total duration in s.
+    pub fn duration(&self) -> f64 {
+        self.t.iter().sum()
+    }
+
+    /// The profile of this shape from `start` for jerk limit `jmax`.
+    pub fn profile(&self, start: State, jmax: f64) -> Profile {
+        let j = self.dir * jmax;
+        let jerks = [j, 0.0, -j, 0.0, -j, 0.0, j];
+        let mut p = Profile::new(start);
+        for (t, jk) in self.t.iter().zip(jerks) {
+            p.push(*t, jk);
+        }
+        p
+    }
+}
+
+/// What a solver is asked to match besides the target velocity and acceleration.
+#[derive(Clone, Copy, Debug)]
+pub enum Goal {
+    /// The final position must equal the target (step 1: the duration is free).
+    Position,
+    /// The duration must equal this value in s (the final position is free).
+    Duration(f64),
+}
+
+/// Phase durations of a polynomial case as polynomials in its parameter.
+struct CasePolys {
+    t: [Poly; 7],
+    /// Durations and accelerations are divided by the parameter (case `Ramps`).
+    hom: bool,
+    lo: f64,
+    hi: f64,
+}
+
+fn zero() -> Poly {
+    Poly::constant(0.0)
+}
+
+fn case_polys(case: Case, pr: &Problem) -> Option<CasePolys> {
+    let Problem {
+        v0,
+        a0,
+        vf,
+        af,
+        lim,
+        ..
+    } = *pr;
+    let j = lim.jmax;
+    let (amax, amin) = (lim.amax, lim.amin);
+    let dv = vf - v0;
+    let x = Poly::x();
+    let mut t = [zero(); 7];
+    let m = 1e-9; // relative widening of parameter ranges; roots are validated afterwards
+    match case {
+        Case::Ramps => {
+            // a1 = (u^2 + K/2) / (2u), a2 = (K/2 - u^2) / (2u) with K = 2 j dv + a0^2 - af^2.
+            let k = 2.0 * j * dv + a0 * a0 - af * af;
+            let xx = x.mul(&x);
+            let a1 = xx.add_const(k / 2.0).scale(0.5);
+            let a2 = xx.scale(-1.0).add_const(k / 2.0).scale(0.5);
+            t[0] = a1.sub(&Poly::linear(0.0, a0)).scale(1.0 / j);
+            t[2] = xx.scale(1.0 / j);
+            t[6] = Poly::linear(0.0, af).sub(&a2).scale(1.0 / j);
+            // a1 <= amax and a2 >= amin restrict u to the intersection of two intervals.
+            let d1 = amax * amax - k / 2.0;
+            let d2 = amin * amin + k / 2.0;
+            let w = m * (amax - amin);
+            if d1 < -w * w || d2 < -w * w {
+                return None;
+            }
+            let (s1, s2) = (d1.max(0.0).sqrt(), d2.max(0.0).sqrt());
+            let lo = (amax - s1).max(-amin - s2).max(0.0) - w;
+            let hi = (amax + s1).min(-amin + s2).min(amax - amin) + w;
+            if hi < lo {
+                return None;
+            }
+            Some(CasePolys {
+                t,
+                hom: true,
+                lo: lo.max(0.0),
+                hi,
+            })
+        }
+        Case::PlateauAmax | Case::PlateauBoth
+            if v0 + (amax * amax - a0 * a0) / (2.0 * j) > lim.vmax + m * (lim.vmax - lim.vmin) =>
+        {
+            // Reaching amax alone already exceeds vmax (the velocity keeps rising on the
+            // plateau): no such shape.
+            None
+        }
+        Case::PlateauAmin | Case::PlateauBoth
+            if vf - (af * af - amin * amin) / (2.0 * j) < lim.vmin - m * (lim.vmax - lim.vmin) =>
+        {
+            // Mirror: the final ramp up from amin would start below vmin.
+            None
+        }
+        Case::PlateauAmax => {
+            // parameter: trough a2 = x.
+            t[0] = Poly::constant((amax - a0) / j);
+            let c = dv - (2.0 * amax * amax - a0 * a0 + af * af) / (2.0 * j);
+            t[1] = x.mul(&x).scale(1.0 / (j * amax)).add_const(c / amax);
+            t[2] = Poly::linear(amax, -1.0).scale(1.0 / j);
+            t[6] = Poly::linear(af, -1.0).scale(1.0 / j);
+            let hi = af.min(amax);
+            let w = m * (amax - amin);
+            Some(CasePolys {
+                t,
+                hom: false,
+                lo: amin - w,
+                hi: hi + w,
+            })
+        }
+        Case::PlateauAmin => {
+            // parameter: peak a1 = x.
+            t[0] = Poly::linear(-a0, 1.0).scale(1.0 / j);
+            t[2] = Poly::linear(-amin, 1.0).scale(1.0 / j);
+            let c = dv - (-a0 * a0 - 2.0 * amin * amin + af * af) / (2.0 * j);
+            t[5] = x.mul(&x).scale(-1.0 / (j * amin)).add_const(c / amin);
+            t[6] = Poly::constant((af - amin) / j);
+            let w = m * (amax - amin);
+            Some(CasePolys {
+                t,
+                hom: false,
+                lo: a0.max(amin) - w,
+                hi: amax + w,
+            })
+        }
+        Case::PlateauBoth => {
+            // parameter: amax plateau length z.
+            t[0] = Poly::constant((amax - a0) / j);
+            t[1] = x;
+            t[2] = Poly::constant((amax - amin) / j);
+            let c = dv - (2.0 * amax * amax - a0 * a0 - 2.0 * amin * amin + af * af) / (2.0 * j);
+            t[5] = Poly::linear(c / amin, -amax / amin);
+            t[6] = Poly::constant((af - amin) / j);
+            let v1 = v0 + (amax * amax - a0 * a0) / (2.0 * j);
+            let zmax = (lim.vmax - v1 - amax * amax / (2.0 * j)) / amax;
+            let zmin = (c / amax).max(0.0);
+            if zmax < -m * (lim.vmax - lim.vmin) / amax {
+                return None;
+            }
+            let w = m * ((lim.vmax - lim.vmin) / amax);
+            Some(CasePolys {
+                t,
+                hom: false,
+                lo: zmin - w,
+                hi: zmax.max(zmin) + w,
+            })
+        }
+        Case::PlateauVmax => None,
+    }
+}
+
+/// Validation tolerances (absolute) for the final state of a problem.
+struct Tol {
+    p: f64,
+    v: f64,
+    a: f64,
+    t: f64,
+}
+
+fn tolerances(pr: &Problem) -> Tol {
+    let l = &pr.lim;
+    let vs = l.vmax.abs().max(l.vmin.abs()).max(pr.v0.abs()).max(1e-300);
+    let as_ = l.amax.abs().max(l.amin.abs()).max(pr.a0.abs());
+    Tol {
+        p: 1e-9 * pr.d.abs().max(1.0),
+        v: 1e-9 * vs.max(1.0),
+        a: 1e-9 * as_.max(1.0),
+        t: 1e-10 * (vs / as_ + as_ / l.jmax).max(1.0),
+    }
+}
+
+/// Turns phase durations into a validated shape, or None.
+fn validate(pr: &Problem, mut t: [f64; 7], goal: Goal, tol: &Tol) -> Option<Shape> {
+    for ti in t.iter_mut() {
+        if !ti.is_finite() || *ti < -tol.t {
+            return None;
+        }
+        *ti = ti.max(0.0);
+    }
+    let start = State::new(0.0, pr.v0, pr.a0);
+    let e = integrate_checked(start, &t, &pr.jerks(), &pr.lim, 1e-9, true)?;
+    if (e.v - pr.vf).abs() > tol.v || (e.a - pr.af).abs() > tol.a {
+        return None;
+    }
+    match goal {
+        Goal::Position => {
+            if (e.p - pr.d).abs() > tol.p {
+                return None;
+            }
+        }
+        Goal::Duration(td) => {
+            if (t.iter().sum::<f64>() - td).abs() > tol.t.max(1e-12 * td) {
+                return None;
+            }
+        }
+    }
+    Some(Shape { t, dir: 1.0 })
+}
+
+/// Solves one sub-shape of the UDDU family of `pr` for `goal`; calls `out` with every valid
+/// solution.
+pub fn solve_case(pr: &Problem, case: Case, goal: Goal, out: &mut impl FnMut(Shape)) {
+    let tol = tolerances(pr);
+    if case == Case::PlateauVmax {
+        if let Some(s) = solve_vmax(pr, goal, &tol) {
+            out(s);
+        }
+        return;
+    }
+    let Some(cp) = case_polys(case, pr) else {
+        return;
+    };
+    let u = if cp.hom {
+        Poly::x()
+    } else {
+        Poly::constant(1.0)
+    };
+    let eq = match goal {
+        Goal::Position => {
+            // Symbolic integration of the homogenised state.
+            let jerks = pr.jerks();
+            let mut p = zero();
+            let mut v = u.mul(&u).scale(pr.v0);
+            let mut a = u.scale(pr.a0);
+            for (ti, jk) in cp.t.iter().zip(jerks) {
+                if ti.c.iter().all(|c| *c == 0.0) {
+                    continue;
+                }
+                let t2 = ti.mul(ti);
+                let t3 = t2.mul(ti);
+                p = p
+                    .add(&v.mul(ti))
+                    .add(&a.mul(&t2).scale(0.5))
+                    .add(&t3.scale(jk / 6.0));
+                v = v.add(&a.mul(ti)).add(&t2.scale(jk / 2.0));
+                a = a.add(&ti.scale(jk));
+            }
+            p.sub(&u.mul(&u).mul(&u).scale(pr.d))
+        }
+        Goal::Duration(td) => {
+            let mut tt = zero();
+            for ti in &cp.t {
+                tt = tt.add(ti);
+            }
+            tt.sub(&u.scale(td))
+        }
+    };
+    let mut roots = [0.0; ROOTS_CAP];
+    let n = eq.roots_in(cp.lo, cp.hi, &mut roots);
+    for &r in &roots[..n] {
+        if cp.hom && r <= 0.0 {
+            continue;
+        }
+        let r = match goal {
+            Goal::Position => polish(pr, &cp, r),
+            Goal::Duration(_) => r,
+        };
+        if let Some(s) = validate(pr, durations(&cp, r), goal, &tol) {
+            out(s);
+        }
+    }
+}
+
+/// Phase durations of a polynomial case at parameter `r`.
+fn durations(cp: &CasePolys, r: f64) -> [f64; 7] {
+    let den = if cp.hom { r } else { 1.0 };
+    let mut t = [0.0; 7];
+    for (ti, pi) in t.iter_mut().zip(&cp.t) {
+        *ti = pi.eval(r) / den;
+    }
+    t
+}
+
+/// Final position error of a polynomial case at parameter `r`, by direct integration (better
+/// conditioned than the expanded polynomial when the limits differ by orders of magnitude).
+fn position_error(pr: &Problem, cp: &CasePolys, r: f64) -> f64 {
+    let t = durations(cp, r);
+    let jerks = pr.jerks();
+    let mut s = State::new(0.0, pr.v0, pr.a0);
+    for (ti, jk) in t.iter().zip(jerks) {
+        s = s.integrate(*ti, jk);
+    }
+    s.p - pr.d
+}
+
+/// Secant refinement of a root of the expanded polynomial on the directly integrated final
+/// position; keeps the better of the two.
+fn polish(pr: &Problem, cp: &CasePolys, r0: f64) -> f64 {
+    let mut x0 = r0;
+    let mut f0 = position_error(pr, cp, x0);
+    let best = (x0, f0.abs());
+    let h = 1e-7 * r0.abs().max(1e-3 * (cp.hi - cp.lo).abs()).max(1e-300);
+    let mut x1 = r0 + h;
+    let mut f1 = position_error(pr, cp, x1);
+    let mut best = if f1.abs() < best.1 {
+        (x1, f1.abs())
+    } else {
+        best
+    };
+    for _ in 0..8 {
+        if f1 == f0 || best.1 == 0.0 {
+            break;
+        }
+        let x2 = x1 - f1 * (x1 - x0) / (f1 - f0);
+        if !x2.is_finite() {
+            break;
+        }
+        let f2 = position_error(pr, cp, x2);
+        if f2.abs() < best.1 {
+            best = (x2, f2.abs());
+        }
+        (x0, f0, x1, f1) = (x1, f1, x2, f2);
+        if (x1 - x0).abs() <= 1e-15 * x1.abs() {
+            break;
+        }
+    }
+    best.0
+}
+
+/// Velocity-plateau case: accelerate to (vmax, 0), cruise, decelerate to the target.
+fn solve_vmax(pr: &Problem, goal: Goal, tol: &Tol) -> Option<Shape> {
+    let Problem {
+        v0,
+        a0,
+        vf,
+        af,
+        lim,
+        ..
+    } = *pr;
+    let j = lim.jmax;
+    let (amax, amin, vmax) = (lim.amax, lim.amin, lim.vmax);
+    let mut t = [0.0; 7];
+    let a1sq = j * (vmax - v0) + a0 * a0 / 2.0;
+    if a1sq < 0.0 {
+        return None;
+    }
+    let a1 = a1sq.sqrt();
+    if a1 > amax {
+        t[0] = (amax - a0) / j;
+        t[1] = (vmax - v0 - (amax * amax - a0 * a0) / (2.0 * j) - amax * amax / (2.0 * j)) / amax;
+        t[2] = amax / j;
+    } else {
+        t[0] = (a1 - a0) / j;
+        t[2] = a1 / j;
+    }
+    let a2sq = j * (vmax - vf) + af * af / 2.0;
+    if a2sq < 0.0 {
+        return None;
+    }
+    let a2 = -a2sq.sqrt();
+    if a2 < amin {
+        t[4] = -amin / j;
+        t[5] = (vf - vmax + amin * amin / (2.0 * j) - (af * af - amin * amin) / (2.0 * j)) / amin;
+        t[6] = (af - amin) / j;
+    } else {
+        t[4] = -a2 / j;
+        t[6] = (af - a2) / j;
+    }
+    if t.iter().any(|x| *x < -tol.t) {
+        return None;
+    }
+    match goal {
+        Goal::Position => {
+            let prof = Shape { t, dir: 1.0 }.profile(State::new(0.0, v0, a0), j);
+            t[3] = (pr.d - prof.end().p) / vmax;
+        }
+        Goal::Duration(td) => {
+            t[3] = td - t.iter().sum::<f64>();
+        }
+    }
+    validate(pr, t, goal, tol)
+}
+
+/// Calls `out` with every UDDU (`dir = 1`) and DUUD (`dir = -1`) shape of `pr` meeting `goal`.
+pub fn solve_all(pr: &Problem, goal: Goal, out: &mut impl FnMut(Shape)) {
+    for case in CASES {
+        solve_case(pr, case, goal, out);
+    }
+    let m = pr.mirrored();
+    for case in CASES {
+        solve_case(&m, case, goal, &mut |s: Shape| {
+            out(Shape { t: s.t, dir: -1.0 })
+        });
+    }
+}
+
+/// The extremal shape of duration `td`: the one with the largest final position if `dir = 1`,
+/// the smallest if `dir = -1`; with that position. None if `td` is too short to reach the target
+/// velocity and acceleration.
+pub fn extreme_at(pr: &Problem, dir: f64, td: f64) -> Option<(f64, Shape)> {
+    let frame = if dir > 0.0 { *pr } else { pr.mirrored() };
+    let mut best: Option<(f64, Shape)> = None;
+    let start = State::new(0.0, frame.v0, frame.a0);
+    for case in CASES {
+        solve_case(&frame, case, Goal::Duration(td), &mut |s: Shape| {
+            let mut e = start;
+            for (t, j) in s.t.iter().zip(frame.jerks()) {
+                e = e.integrate(*t, j);
+            }
+            let p = e.p;
+            if best.is_none_or(|(bp, _)| p > bp) {
+                best = Some((p, s));
+            }
+        });
+    }
+    best.map(|(p, s)| (dir * p, Shape { t: s.t, dir }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Solves `case` for the target position; checks every solution's invariants (no negative
+    /// duration, limits, final state) and that the fixed-duration solver of the same case at the
+    /// shortest solution's duration lands on the target too. Returns the shortest duration.
+    fn check_case(pr: &Problem, case: Case) -> f64 {
+        let mut best: Option<Shape> = None;
+        solve_case(pr, case, Goal::Position, &mut |s: Shape| {
+            assert!(s.t.iter().all(|t| *t >= 0.0));
+            let prof = s.profile(State::new(0.0, pr.v0, pr.a0), pr.lim.jmax);
+            assert!(prof.within_limits(&pr.lim, 1e-9));
+            let e = prof.end();
+            assert!((e.p - pr.d).abs() < 1e-8 * pr.d.abs().max(1.0));
+            assert!((e.v - pr.vf).abs() < 1e-8 && (e.a - pr.af).abs() < 1e-8);
+            if best.is_none_or(|b| s.duration() < b.duration()) {
+                best = Some(s);
+            }
+        });
+        let best = best.unwrap_or_else(|| panic!("{case:?} found no solution"));
+        let td = best.duration();
+        let (p, _) = extreme_at(pr, 1.0, td).expect("extreme at the optimum");
+        assert!(
+            (p - pr.d).abs() < 1e-8 * pr.d.abs().max(1.0),
+            "{p} vs {}",
+            pr.d
+        );
+        // Nothing shorter over all cases and both directions.
+        solve_all(pr, Goal::Position, &mut |s: Shape| {
+            assert!(s.duration() >= td - 1e-9, "{case:?}: shorter shape {s:?}");
+        });
+        td
+    }
+
+    fn problem(d: f64, lim: Limits) -> Problem {
+        Problem::new(&State::new(0.0, 0.0, 0.0), &State::new(d, 0.0, 0.0), &lim)
+    }
+
+    #[test]
+    fn ramps_only() {
+        let pr = problem(0.3, Limits::symmetric(10.0, 10.0, 2.0));
+        let td = check_case(&pr, Case::Ramps);
+        assert!((td - 4.0 * (0.3f64 / 4.0).cbrt()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn plateau_amax_only() {
+        // Small amax, large |amin|: only the acceleration phase saturates.
+        let lim = Limits {
+            vmax: 100.0,
+            vmin: -100.0,
+            amax: 0.5,
+            amin: -5.0,
+            jmax: 1.0,
+        };
+        check_case(&problem(3.0, lim), Case::PlateauAmax);
+    }
+
+    #[test]
+    fn plateau_amin_only() {
+        let lim = Limits {
+            vmax: 100.0,
+            vmin: -100.0,
+            amax: 5.0,
+            amin: -0.5,
+            jmax: 1.0,
+        };
+        check_case(&problem(3.0, lim), Case::PlateauAmin);
+    }
+
+    #[test]
+    fn plateau_both_accelerations() {
+        let pr = problem(5.0, Limits::symmetric(100.0, 1.0, 4.0));
+        check_case(&pr, Case::PlateauBoth);
+    }
+
+    #[test]
+    fn plateau_vmax() {
+        let pr = problem(10.0, Limits::symmetric(1.0, 2.0, 10.0));
+        let td = check_case(&pr, Case::PlateauVmax);
+        assert!((td - (10.0 + 0.5 + 0.2)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn mirrored_shape_for_negative_motion() {
+        let pr = problem(-10.0, Limits::symmetric(1.0, 2.0, 10.0));
+        let mut found = false;
+        solve_all(&pr, Goal::Position, &mut |s: Shape| {
+            if s.dir < 0.0 && (s.duration() - 10.7).abs() < 1e-12 {
+                found = true;
+            }
+        });
+        assert!(found);
+    }
+
+    #[test]
+    fn fixed_duration_extremes_bracket_the_target() {
+        // For durations above the optimum the target lies between Pmin and Pmax.
+        let pr = Problem::new(
+            &State::new(0.0, 0.4, -0.3),
+            &State::new(1.0, 0.2, 0.1),
+            &Limits::symmetric(1.0, 1.0, 1.0),
+        );
+        let mut tmin = f64::INFINITY;
+        solve_all(&pr, Goal::Position, &mut |s: Shape| {
+            tmin = tmin.min(s.duration())
+        });
+        for k in 1..20 {
+            let t = tmin * (1.0 + 0.1 * k as f64);
+            let (hi, _) = extreme_at(&pr, 1.0, t).unwrap();
+            let (lo, _) = extreme_at(&pr, -1.0, t).unwrap();
+            assert!(
+                lo <= pr.d + 1e-12 && pr.d <= hi + 1e-12,
+                "t {t}: [{lo}, {hi}]"
+            );
+        }
+        let (hi, _) = extreme_at(&pr, 1.0, tmin * 0.99).unwrap_or((
+            f64::NEG_INFINITY,
+            Shape {
+                t: [0.0; 7],
+                dir: 1.0,
+            },
+        ));
+        assert!(hi < pr.d);
+    }
+}

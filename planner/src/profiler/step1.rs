@@ -1,0 +1,243 @@
+//! Step 1 for one DoF: the minimal duration and the set of feasible durations.
+//!
+//! All extremal shapes that reach the target exactly (see `shapes.rs` / `velocity.rs`) are
+//! collected; their durations are the boundaries of the feasible set, the shortest one is the
+//! time-optimal profile. A duration `T` is feasible iff the target lies within
+//! `[Pmin(T), Pmax(T)]` (fixed-duration extremes); beyond the last boundary every duration is
+//! feasible. [`Step1::feasible_intervals`] rebuilds the whole set by testing the midpoint of every
+//! gap between consecutive boundaries (the gaps that are not feasible are the *blocked
+//! intervals*); synchronisation tests its candidate durations directly with
+//! [`Step1::is_feasible`].
+
+use super::brake::{position_brake, velocity_brake};
+use super::limits::{Limits, State};
+use super::profile::Profile;
+use super::shapes::{self, Goal, Problem, Shape};
+use super::velocity;
+use super::ControlInterface;
+
+/// Maximal number of distinct candidate durations kept.
+pub const MAX_CANDIDATES: usize = 24;
+/// Maximal number of feasible intervals kept.
+pub const MAX_INTERVALS: usize = 8;
+
+/// Result of step 1 for one DoF.
+#[derive(Clone, Copy, Debug)]
+pub struct Step1 {
+    interface: ControlInterface,
+    /// Brake pre-trajectory (empty if the current state is within the limits).
+    pub brake: Profile,
+    problem: Problem,
+    /// Absolute start state of the main profile (after the brake).
+    start: State,
+    cand: [Shape; MAX_CANDIDATES],
+    n_cand: usize,
+}
+
+impl Step1 {
+    /// Solves step 1. Returns None if no profile was found.
+    pub fn solve(
+        interface: ControlInterface,
+        current: &State,
+        target: &State,
+        lim: &Limits,
+    ) -> Option<Step1> {
+        let brake = match interface {
+            ControlInterface::Position => position_brake(*current, lim),
+            ControlInterface::Velocity => velocity_brake(*current, lim),
+        };
+        let start = brake.end();
+        let problem = Problem::new(&start, target, lim);
+        let mut s = Step1 {
+            interface,
+            brake,
+            problem,
+            start,
+            cand: [Shape {
+                t: [0.0; 7],
+                dir: 1.0,
+            }; MAX_CANDIDATES],
+            n_cand: 0,
+        };
+        let mut all = [Shape {
+            t: [0.0; 7],
+            dir: 1.0,
+        }; 64];
+        let mut n = 0;
+        let mut collect = |sh: Shape| {
+            if n < all.len() {
+                all[n] = sh;
+                n += 1;
+            }
+        };
+        // Already at the target: duration 0 is a solution.
+        if s.zero_solution() {
+            collect(Shape {
+                t: [0.0; 7],
+                dir: 1.0,
+            });
+        }
+        match interface {
+            ControlInterface::Position => shapes::solve_all(&problem, Goal::Position, &mut collect),
+            ControlInterface::Velocity => {
+                velocity::solve_all(&problem, Goal::Position, &mut collect)
+            }
+        }
+        if n == 0 {
+            return None;
+        }
+        let all = &mut all[..n];
+        all.sort_by(|a, b| a.duration().total_cmp(&b.duration()));
+        for sh in all.iter() {
+            let d = sh.duration();
+            if s.n_cand > 0 {
+                let last = s.cand[s.n_cand - 1].duration();
+                if d - last <= 1e-11 * d.max(1e-3) {
+                    continue;
+                }
+            }
+            if s.n_cand < MAX_CANDIDATES {
+                s.cand[s.n_cand] = *sh;
+                s.n_cand += 1;
+            }
+        }
+        Some(s)
+    }
+
+    fn zero_solution(&self) -> bool {
+        let pr = &self.problem;
+        let tv = 1e-12 * pr.v0.abs().max(pr.vf.abs()).max(1.0);
+        let ta = 1e-12 * pr.lim.amax.abs().max(1.0);
+        let pos_ok = match self.interface {
+            ControlInterface::Position => pr.d.abs() <= 1e-12 * pr.d.abs().max(1.0),
+            ControlInterface::Velocity => true,
+        };
+        pos_ok && (pr.v0 - pr.vf).abs() <= tv && (pr.a0 - pr.af).abs() <= ta
+    }
+
+    /// Extremal final position (velocity for the velocity interface) over main-profile
+    /// durations `td`, with the shape attaining it.
+    fn extreme_at(&self, dir: f64, td: f64) -> Option<(f64, Shape)> {
+        match self.interface {
+            ControlInterface::Position => shapes::extreme_at(&self.problem, dir, td),
+            ControlInterface::Velocity => velocity::extreme_at(&self.problem, dir, td),
+        }
+    }
+
+    fn goal_value(&self) -> f64 {
+        match self.interface {
+            ControlInterface::Position => self.problem.d,
+            ControlInterface::Velocity => self.problem.vf,
+        }
+    }
+
+    fn goal_tol(&self) -> f64 {
+        1e-9 * self.goal_value().abs().max(1.0)
+    }
+
+    /// True if the main-profile duration `td` admits a trajectory to the target.
+    fn feasible_main(&self, td: f64) -> bool {
+        let g = self.goal_value();
+        let tol = self.goal_tol();
+        match (self.extreme_at(1.0, td), self.extreme_at(-1.0, td)) {
+            (Some((hi, _)), Some((lo, _))) => lo <= g + tol && hi >= g - tol,
+            _ => false,
+        }
+    }
+
+    /// Duration of the brake pre-trajectory in s.
+    pub fn brake_duration(&self) -> f64 {
+        self.brake.duration()
+    }
+
+    /// Minimal total duration (brake included) in s.
+    pub fn t_min(&self) -> f64 {
+        self.brake_duration() + self.cand[0].duration()
+    }
+
+    /// Total durations (brake included, s) of all extremal profiles reaching the target,
+    /// ascending: the boundaries of the feasible set.
+    pub fn boundaries(&self) -> impl Iterator<Item = f64> + '_ {
+        let tb = self.brake_duration();
+        self.cand[..self.n_cand]
+            .iter()
+            .map(move |c| c.duration() + tb)
+    }
+
+    /// Feasible intervals of the total duration (brake included) in s, ascending; the last one
+    /// is unbounded. Rebuilt from the boundaries by testing the midpoint of every gap (cost:
+    /// a few fixed-duration solves; not needed for synchronisation, which tests candidates
+    /// directly).
+    pub fn feasible_intervals(&self) -> ([(f64, f64); MAX_INTERVALS], usize) {
+        let tb = self.brake_duration();
+        let mut out = [(0.0, 0.0); MAX_INTERVALS];
+        let mut n = 0;
+        let mut lo = self.cand[0].duration();
+        for i in 0..self.n_cand - 1 {
+            let (a, b) = (self.cand[i].duration(), self.cand[i + 1].duration());
+            if !self.feasible_main(0.5 * (a + b)) && n < MAX_INTERVALS - 1 {
+                out[n] = (lo + tb, a + tb);
+                n += 1;
+                lo = b;
+            }
+        }
+        out[n] = (lo + tb, f64::INFINITY);
+        (out, n + 1)
+    }
+
+    /// True if the total duration `t` (s, brake included) admits a trajectory to the target.
+    /// Durations within 1e-12 (relative) of a boundary count as feasible.
+    pub fn is_feasible(&self, t: f64) -> bool {
+        let td = t - self.brake_duration();
+        let tol = 1e-12 * td.abs().max(1.0);
+        if td < self.cand[0].duration() - tol {
+            return false;
+        }
+        self.cand[..self.n_cand]
+            .iter()
+            .any(|c| (c.duration() - td).abs() <= tol)
+            || self.feasible_main(td)
+    }
+
+    /// The time-optimal profile (brake included).
+    pub fn optimal_profile(&self) -> Profile {
+        self.with_brake(&self.cand[0].profile(self.start, self.problem.lim.jmax))
+    }
+
+    fn with_brake(&self, main: &Profile) -> Profile {
+        let mut p = self.brake;
+        p.append(main);
+        p
+    }
+
+    /// A profile of total duration `t` (s, brake included) reaching the target, or None if `t`
+    /// is not feasible. On a boundary of the feasible set the extremal shape itself is used;
+    /// inside, the convex combination of the position-maximal and position-minimal shapes of
+    /// that duration that lands exactly on the target.
+    pub fn profile_at(&self, t: f64) -> Option<Profile> {
+        let td = t - self.brake_duration();
+        let tol = 1e-12 * td.abs().max(1.0);
+        let jmax = self.problem.lim.jmax;
+        for c in &self.cand[..self.n_cand] {
+            if (c.duration() - td).abs() <= tol {
+                return Some(self.with_brake(&c.profile(self.start, jmax)));
+            }
+        }
+        let (hi, shi) = self.extreme_at(1.0, td)?;
+        let (lo, slo) = self.extreme_at(-1.0, td)?;
+        let g = self.goal_value();
+        let tolg = self.goal_tol();
+        if g > hi + tolg || g < lo - tolg {
+            return None;
+        }
+        let phi = shi.profile(self.start, jmax);
+        let plo = slo.profile(self.start, jmax);
+        let main = if hi - lo <= 1e-14 * g.abs().max(1.0) {
+            phi
+        } else {
+            let lambda = ((g - lo) / (hi - lo)).clamp(0.0, 1.0);
+            Profile::blend(&phi, &plo, lambda)
+        };
+        Some(self.with_brake(&main))
+    }
+}

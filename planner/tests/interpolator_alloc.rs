@@ -1,0 +1,64 @@
+//! The interpolator's cycle does not allocate: a counting global allocator observes no
+//! allocation during `step()` (including a stop request).
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use pcr_planner::interpolator::{Interpolator, MotionCommand, Phase};
+use pcr_planner::path::{Path, Pose};
+use pcr_planner::speed::SpeedLimits;
+
+struct Counting;
+
+static ALLOCS: AtomicUsize = AtomicUsize::new(0);
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCS.fetch_add(1, Ordering::SeqCst);
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+#[test]
+fn step_and_stop_do_not_allocate() {
+    let start = Pose::new(0.0, 0.0, 0.0);
+    let mut ip = Interpolator::new(start, 100.0, 1000.0).unwrap();
+    let rect = Path::rectangle(start, 20.0, 10.0, 0.3).unwrap();
+    let circle = Path::circle(10.0, 0.0, 10.0, std::f64::consts::PI, true, 0.0).unwrap();
+    let lim = SpeedLimits::JerkLimited {
+        vmax: 20.0,
+        amax: 50.0,
+        jmax: 500.0,
+    };
+    ip.push(MotionCommand {
+        path: rect,
+        limits: lim,
+    })
+    .unwrap();
+    ip.push(MotionCommand {
+        path: circle,
+        limits: lim,
+    })
+    .unwrap();
+    let before = ALLOCS.load(Ordering::SeqCst);
+    let mut steps = 0;
+    for k in 0..10_000 {
+        if k == 200 {
+            ip.request_stop();
+        }
+        let sp = ip.step();
+        steps += 1;
+        if k > 200 && sp.phase == Phase::Idle {
+            break;
+        }
+    }
+    let after = ALLOCS.load(Ordering::SeqCst);
+    assert!(steps > 200);
+    assert_eq!(after, before, "step() allocated");
+}
