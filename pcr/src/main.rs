@@ -6,6 +6,7 @@ use clap::{Parser, Subcommand};
 
 mod csvio;
 mod figures_kin;
+mod figures_plan;
 mod kin;
 mod plan;
 mod plant;
