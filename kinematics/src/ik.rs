@@ -131,9 +131,16 @@ impl Robot {
         }
         let h = |k: usize| hv[k];
         let dh = |k: usize| dhv[k];
-        // Exact h and dh/dtheta.
-        let eval = |theta: f64| {
-            let t = leg.local_tip(theta);
+        // Exact h and dh/dtheta; sin and cos from the cell's tabulated values rotated by the
+        // small offset (a short series), which is exact to round-off and avoids libm.
+        let eval_near = |theta: f64, k: usize| {
+            let (s, c) = sin_cos_near(
+                theta,
+                tab.theta0 + tab.dtheta * k as f64,
+                tab.st[k],
+                tab.ct[k],
+            );
+            let t = leg.local_tip_sc(theta, s, c);
             let d = g::sub(p, t.m);
             (g::dot(d, d) - leg.l_st * leg.l_st, -2.0 * g::dot(d, t.dm))
         };
@@ -146,6 +153,7 @@ impl Robot {
         };
         let mut h_prev = h(0);
         for k in 1..TABLE_N {
+            let eval = |theta: f64| eval_near(theta, k - 1);
             let h_k = h(k);
             // Most cells have no root and no turning point towards zero: skip them first.
             if h_prev * h_k > 0.0 {
@@ -289,6 +297,32 @@ impl Robot {
         }
         Ok(s)
     }
+}
+
+/// sin and cos of `theta` from those of a nearby `theta0` (|theta - theta0| <= 0.3 rad: an
+/// addition theorem with 14th-order series of the offset, accurate to round-off).
+#[inline]
+fn sin_cos_near(theta: f64, theta0: f64, s0: f64, c0: f64) -> (f64, f64) {
+    let d = theta - theta0;
+    if d.abs() > 0.3 {
+        return theta.sin_cos();
+    }
+    let d2 = d * d;
+    let sd = d
+        * (1.0
+            + d2 * (-1.0 / 6.0
+                + d2 * (1.0 / 120.0
+                    + d2 * (-1.0 / 5040.0
+                        + d2 * (1.0 / 362_880.0
+                            + d2 * (-1.0 / 39_916_800.0 + d2 / 6_227_020_800.0))))));
+    let cd = 1.0
+        + d2 * (-0.5
+            + d2 * (1.0 / 24.0
+                + d2 * (-1.0 / 720.0
+                    + d2 * (1.0 / 40_320.0
+                        + d2 * (-1.0 / 3_628_800.0
+                            + d2 * (1.0 / 479_001_600.0 - d2 / 87_178_291_200.0))))));
+    (s0 * cd + c0 * sd, c0 * cd - s0 * sd)
 }
 
 /// Safeguarded Newton in [a, b], where h(a) has sign of `ha` and h(b) the opposite.

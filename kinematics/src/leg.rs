@@ -48,6 +48,13 @@ pub struct LocalTip {
 /// (1 - cos x)/x, sin(x)/x and their derivatives, stable at x = 0.
 #[inline]
 fn arc_functions(x: f64) -> (f64, f64, f64, f64) {
+    let (s, c) = x.sin_cos();
+    arc_functions_sc(x, s, c)
+}
+
+/// [`arc_functions`] with sin x and cos x already known.
+#[inline]
+fn arc_functions_sc(x: f64, s: f64, c: f64) -> (f64, f64, f64, f64) {
     if x.abs() < SERIES_THETA {
         let x2 = x * x;
         let f1 = x
@@ -64,7 +71,6 @@ fn arc_functions(x: f64) -> (f64, f64, f64, f64) {
                 + x2 * (1.0 / 30.0 + x2 * (-1.0 / 840.0 + x2 * (1.0 / 45360.0 - x2 / 3991680.0))));
         (f1, f2, d1, d2)
     } else {
-        let (s, c) = x.sin_cos();
         let f1 = (1.0 - c) / x;
         let f2 = s / x;
         let d1 = (s - f1) / x;
@@ -95,8 +101,14 @@ impl Leg {
     /// The tip in the local frame for bending angle `theta` = kappa l_C (rad).
     #[inline]
     pub fn local_tip(&self, theta: f64) -> LocalTip {
-        let (f1, f2, d1, d2) = arc_functions(theta);
         let (s, c) = theta.sin_cos();
+        self.local_tip_sc(theta, s, c)
+    }
+
+    /// [`Leg::local_tip`] with sin theta and cos theta already known.
+    #[inline]
+    pub fn local_tip_sc(&self, theta: f64, s: f64, c: f64) -> LocalTip {
+        let (f1, f2, d1, d2) = arc_functions_sc(theta, s, c);
         LocalTip {
             m: [self.l_c * f1 + self.l_ce * s, self.l_c * f2 + self.l_ce * c],
             dm: [self.l_c * d1 + self.l_ce * c, self.l_c * d2 - self.l_ce * s],
