@@ -111,8 +111,12 @@ impl FirmwareInTheLoop {
         std::fs::create_dir_all(&opts.work_dir).map_err(|e| {
             FilError::Emulator(format!("cannot create {}: {e}", opts.work_dir.display()))
         })?;
-        let fw = build_firmware(&opts.work_dir.join("firmware")).map_err(FilError::Build)?;
-        let link = opts.work_dir.join(format!(
+        // Absolute: `make -C driver/firmware` would take a relative BUILD folder from there.
+        let work_dir = std::path::absolute(&opts.work_dir).map_err(|e| {
+            FilError::Emulator(format!("bad folder {}: {e}", opts.work_dir.display()))
+        })?;
+        let fw = build_firmware(&work_dir.join("firmware")).map_err(FilError::Build)?;
+        let link = work_dir.join(format!(
             "uart-{}-{}",
             std::process::id(),
             INSTANCE.fetch_add(1, Ordering::Relaxed)

@@ -268,3 +268,56 @@ fn firmware_watchdog_stop_leaves_the_plant_holding() {
     assert!(!s4.fault);
     assert_eq!(fil.true_state().counter, back);
 }
+
+/// The supervisor's path: a `[driver]` table selects the FIL, `build_backend` starts it, the
+/// usual safety decorators wrap it, and the plant's capture and true state stay reachable.
+#[test]
+fn selector_builds_the_fil_behind_the_safety_wrappers() {
+    let _g = lock();
+    let text = format!(
+        "[supervisor]\ncycle_ms = 20\n\n[driver]\nbackend = \"firmware_in_the_loop\"\nplant = {:?}\nwork_dir = {:?}\n",
+        repo("configs/plant.toml"),
+        Path::new(env!("CARGO_TARGET_TMPDIR")).join("pcr-fil")
+    );
+    let sel = pcr_fil::DriverBackend::from_toml_str(&text, "test").unwrap();
+    let backend = sel
+        .build_backend(&robot())
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(backend.name().starts_with("fil:"), "{}", backend.name());
+    let home = backend.plant().unwrap().home_steps();
+    let mut drv = pcr_driver::Watchdog::new(
+        pcr_driver::PositionLimit::new(
+            pcr_driver::RateLimit::new(backend, 600.0),
+            [0; 3],
+            [400; 3],
+        ),
+        1.0,
+    );
+    let target = [home[0] + 30, home[1] - 20, home[2] + 10];
+    let mut t = 0.0;
+    let mut next = Instant::now();
+    let mut done = false;
+    for _ in 0..300 {
+        if let Some(w) = next.checked_duration_since(Instant::now()) {
+            std::thread::sleep(w);
+        }
+        next += PERIOD;
+        t += PERIOD_S;
+        drv.write(t, PERIOD_S, &cmd(target)).unwrap();
+        let s = drv.read(t, PERIOD_S).unwrap();
+        if s.steps == target && !s.moving {
+            done = true;
+            break;
+        }
+    }
+    assert!(done, "never reached {target:?}");
+    let backend = drv.inner_mut().inner_mut().inner_mut();
+    assert_eq!(backend.true_state().unwrap().counter, target);
+    assert!(!backend.drain_measurements().is_empty());
+    let diag = drv.diagnostics();
+    assert!(
+        diag.iter().any(|(k, _)| k == "fil.steps_applied"),
+        "{diag:?}"
+    );
+    assert!(diag.iter().any(|(k, _)| k == "serial.timeouts"), "{diag:?}");
+}
