@@ -47,6 +47,10 @@ pub enum DriverBackend {
         /// Firmware build and PTY folder (default: `$TMPDIR/pcr-fil`).
         #[serde(default)]
         work_dir: Option<PathBuf>,
+        /// Firmware host watchdog, ms (default: the firmware's 200; 0 = off). A longer one
+        /// tolerates a starved emulator.
+        #[serde(default)]
+        watchdog_ms: Option<u16>,
     },
 }
 
@@ -109,11 +113,20 @@ impl DriverBackend {
                 let cfg = PlantConfig::load(plant)?;
                 Backend::Plant(Box::new(Plant::new(robot, &cfg)?))
             }
-            DriverBackend::FirmwareInTheLoop { plant, work_dir } => {
+            DriverBackend::FirmwareInTheLoop {
+                plant,
+                work_dir,
+                watchdog_ms,
+            } => {
                 let cfg = PlantConfig::load(plant)?;
                 let mut opts = FilOptions::default();
                 if let Some(d) = work_dir {
                     opts.work_dir = d.clone();
+                }
+                if let Some(ms) = watchdog_ms {
+                    let mut fw = FilOptions::firmware_for(robot);
+                    fw.watchdog_ms = *ms;
+                    opts.firmware = Some(fw);
                 }
                 Backend::FirmwareInTheLoop(Box::new(FirmwareInTheLoop::start(robot, &cfg, opts)?))
             }
@@ -218,7 +231,8 @@ mod tests {
             fil,
             DriverBackend::FirmwareInTheLoop {
                 plant: "configs/plant.toml".into(),
-                work_dir: None
+                work_dir: None,
+                watchdog_ms: None
             }
         );
         let serial = DriverBackend::from_toml_str(

@@ -51,6 +51,23 @@ impl Default for FilOptions {
     }
 }
 
+impl FilOptions {
+    /// The firmware defaults with `max_rate` set to the robot's `actuation.max_step_rate`
+    /// (smallest over the legs): what [`FirmwareInTheLoop::start`] sends when
+    /// [`FilOptions::firmware`] is `None`.
+    pub fn firmware_for(robot: &RobotConfig) -> FwConfig {
+        FwConfig {
+            max_rate: robot
+                .legs
+                .iter()
+                .map(|l| l.actuation.max_step_rate)
+                .fold(f64::INFINITY, f64::min)
+                .clamp(1.0, 1000.0) as u16,
+            ..FwConfig::default()
+        }
+    }
+}
+
 /// Counters of the FIL coupling (see also the serial backend's).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct FilCounters {
@@ -123,15 +140,9 @@ impl FirmwareInTheLoop {
         ));
         let started = Instant::now();
         let sim = SimFirmware::spawn(&fw, &link).map_err(FilError::Emulator)?;
-        let firmware = opts.firmware.unwrap_or_else(|| FwConfig {
-            max_rate: robot
-                .legs
-                .iter()
-                .map(|l| l.actuation.max_step_rate)
-                .fold(f64::INFINITY, f64::min)
-                .clamp(1.0, 1000.0) as u16,
-            ..FwConfig::default()
-        });
+        let firmware = opts
+            .firmware
+            .unwrap_or_else(|| FilOptions::firmware_for(robot));
         let mut cfg = SerialConfig::new(sim.port_path());
         cfg.reply_timeout = opts.reply_timeout;
         cfg.firmware_config = Some(firmware);
@@ -306,7 +317,13 @@ impl Driver for FirmwareInTheLoop {
     /// when the plant could not follow (no equilibrium; it holds position).
     fn read(&mut self, time_s: f64, period_s: f64) -> Result<DriverState, DriverError> {
         let mut st = self.serial.read(time_s, period_s)?;
-        self.sync_to(st.steps);
+        if st.fault {
+            // A refused setpoint (latched fault) reports the last known positions, not the
+            // present ones: nothing to wait for (the firmware holds).
+            let _ = self.sync();
+        } else {
+            self.sync_to(st.steps);
+        }
         st.fault |= self.plant_fault;
         Ok(st)
     }

@@ -38,7 +38,18 @@ fn start(plant: &str, opts: FilOptions) -> FirmwareInTheLoop {
     FirmwareInTheLoop::start(&robot(), &cfg, opts).unwrap_or_else(|e| panic!("{e}"))
 }
 
+/// Streaming tests: a generous firmware watchdog, so that a host thread delayed by a busy
+/// machine does not trip it (the watchdog test uses the firmware's default 200 ms).
 fn options() -> FilOptions {
+    let mut fw = FilOptions::firmware_for(&robot());
+    fw.watchdog_ms = 5000;
+    FilOptions {
+        firmware: Some(fw),
+        ..strict_options()
+    }
+}
+
+fn strict_options() -> FilOptions {
     FilOptions {
         work_dir: Path::new(env!("CARGO_TARGET_TMPDIR")).join("pcr-fil"),
         // A busy machine can stall the emulator for a second.
@@ -110,6 +121,7 @@ impl Host {
     fn settle(&mut self, fil: &mut FirmwareInTheLoop, steps: [i32; 3]) -> DriverState {
         for _ in 0..500 {
             let s = self.cycle(fil, steps);
+            assert!(!s.fault, "fault while settling at {steps:?}: {s:?}");
             if s.steps == steps && !s.moving {
                 return s;
             }
@@ -221,7 +233,7 @@ fn ideal_plant_pose_equals_cc_fk_of_the_commanded_steps() {
 #[test]
 fn firmware_watchdog_stop_leaves_the_plant_holding() {
     let _g = lock();
-    let mut fil = start("configs/plant.toml", options());
+    let mut fil = start("configs/plant.toml", strict_options());
     let home = fil.plant().home_steps();
     // 240 steps away on leg 1 = 20 segments at 12 steps: far more than the 200 ms watchdog.
     let target = [home[0] + 240, home[1] - 120, home[2] - 120];
@@ -275,7 +287,7 @@ fn firmware_watchdog_stop_leaves_the_plant_holding() {
 fn selector_builds_the_fil_behind_the_safety_wrappers() {
     let _g = lock();
     let text = format!(
-        "[supervisor]\ncycle_ms = 20\n\n[driver]\nbackend = \"firmware_in_the_loop\"\nplant = {:?}\nwork_dir = {:?}\n",
+        "[supervisor]\ncycle_ms = 20\n\n[driver]\nbackend = \"firmware_in_the_loop\"\nplant = {:?}\nwork_dir = {:?}\nwatchdog_ms = 5000\n",
         repo("configs/plant.toml"),
         Path::new(env!("CARGO_TARGET_TMPDIR")).join("pcr-fil")
     );
@@ -305,6 +317,7 @@ fn selector_builds_the_fil_behind_the_safety_wrappers() {
         t += PERIOD_S;
         drv.write(t, PERIOD_S, &cmd(target)).unwrap();
         let s = drv.read(t, PERIOD_S).unwrap();
+        assert!(!s.fault, "{s:?}");
         if s.steps == target && !s.moving {
             done = true;
             break;
