@@ -34,6 +34,9 @@ struct Args {
     /// Firmware build and PTY folder.
     #[arg(long)]
     work_dir: Option<PathBuf>,
+    /// Firmware host watchdog, ms (default: the firmware's 200).
+    #[arg(long)]
+    watchdog_ms: Option<u16>,
 }
 
 fn percentile(v: &mut [f64], p: f64) -> f64 {
@@ -49,6 +52,11 @@ fn main() -> Result<()> {
     let mut opts = FilOptions::default();
     if let Some(d) = args.work_dir {
         opts.work_dir = d;
+    }
+    if let Some(ms) = args.watchdog_ms {
+        let mut fw = FilOptions::firmware_for(&robot);
+        fw.watchdog_ms = ms;
+        opts.firmware = Some(fw);
     }
     let t_build = Instant::now();
     let mut fil = FirmwareInTheLoop::start(&robot, &plant, opts).context("starting the FIL")?;
