@@ -242,6 +242,24 @@ impl SimFirmware {
         self.log.0.lock().unwrap().clone()
     }
 
+    /// The steps from index `from` of the step log on (for streaming it incrementally without
+    /// copying the whole log), and the index to pass next time.
+    pub fn steps_since(&self, from: usize) -> (Vec<StepEvent>, usize) {
+        let g = self.log.0.lock().unwrap();
+        let from = from.min(g.steps.len());
+        (g.steps[from..].to_vec(), g.steps.len())
+    }
+
+    /// Number of illegal coil-pattern changes seen so far (lost steps on real hardware).
+    pub fn illegal_count(&self) -> usize {
+        self.log.0.lock().unwrap().illegal.len()
+    }
+
+    /// Whether the harness has exited.
+    pub fn exited(&self) -> bool {
+        self.log.0.lock().unwrap().exited
+    }
+
     /// Positions decoded from the coil patterns.
     pub fn positions(&self) -> [i64; N_MOTORS] {
         self.log.0.lock().unwrap().pos

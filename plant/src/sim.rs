@@ -50,6 +50,18 @@ pub struct TrueState {
     pub eq: Equilibrium,
 }
 
+/// One motor step made outside the plant's stepper model (e.g. decoded from the coil pins of
+/// an emulated firmware), for [`Plant::advance_with_steps`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MotorStep {
+    /// Time of the step, s (plant time).
+    pub t_s: f64,
+    /// Motor (leg) index, 0..3.
+    pub motor: usize,
+    /// Motor position after the step, steps.
+    pub pos: i32,
+}
+
 /// The simulated robot.
 pub struct Plant {
     truth: TruthModel,
@@ -298,10 +310,99 @@ impl Plant {
         Ok(())
     }
 
+    /// Advances the plant to `t_end` (s) driven by motor steps given from outside (firmware in
+    /// the loop) instead of its own stepper model: the rate limit and missed steps are bypassed,
+    /// while backlash, creep, friction, the statics and the capture model stay the plant's.
+    /// Time advances in sub-steps of at most `cycle_s / substeps_per_cycle`; each step (sorted
+    /// by time) is applied at the end of the first sub-step at or after its time (steps dated
+    /// before the plant's present time are applied at the first sub-step). `enable` is the
+    /// coil state reported by [`Driver::read`]. On a failed static solve everything done by
+    /// this call is rolled back, the motors hold their previous positions until `t_end`, the
+    /// plant reports `fault` and the error is returned.
+    pub fn advance_with_steps(
+        &mut self,
+        t_end: f64,
+        steps: &[MotorStep],
+        enable: bool,
+    ) -> Result<(), PlantError> {
+        self.enabled = enable;
+        match self.run_external(t_end, steps) {
+            Ok(()) => {
+                self.fault = false;
+                self.limited = false;
+                self.target = self.state.counter;
+                Ok(())
+            }
+            Err(e) => {
+                self.fault = true;
+                self.run_external(t_end, &[])?;
+                Err(e.into())
+            }
+        }
+    }
+
+    fn run_external(&mut self, t_end: f64, steps: &[MotorStep]) -> Result<(), StaticsError> {
+        if steps.is_empty() && t_end <= self.state.t_s {
+            return Ok(());
+        }
+        let backup = (
+            self.act.clone(),
+            self.creep,
+            self.anchors,
+            self.state.clone(),
+        );
+        let marks = (
+            self.history.len(),
+            self.measurements.len(),
+            self.next_sample,
+        );
+        // Drop whatever the plant's own stepper model still had planned.
+        let hold = StepperParams {
+            max_rate: None,
+            pull_out_rate: None,
+            miss_probability: 0.0,
+        };
+        for a in &mut self.act {
+            let c = a.counter;
+            a.plan_cycle(self.state.t_s, 1.0, c, &hold);
+        }
+        let h = self.cfg.simulation.cycle_s / self.cfg.simulation.substeps_per_cycle.max(1) as f64;
+        let mut next = 0;
+        let mut t_prev = self.state.t_s;
+        loop {
+            let t = (t_prev + h).min(t_end).max(t_prev);
+            while next < steps.len() && (steps[next].t_s <= t + 1e-12 || t >= t_end) {
+                let s = steps[next];
+                if let Some(a) = self.act.get_mut(s.motor) {
+                    external_step(a, s.pos);
+                }
+                next += 1;
+            }
+            if let Err(e) = self.settle_substep(t, t - t_prev) {
+                (self.act, self.creep, self.anchors, self.state) = backup;
+                self.history.truncate(marks.0.min(self.history.len()));
+                self.measurements
+                    .truncate(marks.1.min(self.measurements.len()));
+                self.next_sample = marks.2;
+                self.jac_cache = None;
+                return Err(e);
+            }
+            t_prev = t;
+            if t >= t_end {
+                return Ok(());
+            }
+        }
+    }
+
     fn substep(&mut self, t: f64, dt: f64) -> Result<(), StaticsError> {
         for (a, p) in self.act.iter_mut().zip(&self.stepper) {
             a.advance_to(t, p.miss_probability, &mut self.rng_stepper);
         }
+        self.settle_substep(t, dt)
+    }
+
+    /// The statics, creep and friction at `t` with the actuators as they are.
+    fn settle_substep(&mut self, t: f64, dt: f64) -> Result<(), StaticsError> {
         let output: [f64; 3] = std::array::from_fn(|i| self.act[i].output);
         if self.cfg.creep.enabled {
             let c = &self.cfg.creep;
@@ -437,6 +538,21 @@ impl Plant {
         }
         let last = h.back().expect("history is never empty");
         (last.1, last.2)
+    }
+}
+
+/// A motor step made outside the plant's stepper model (firmware in the loop): the counter and
+/// the rotor go to `pos`, the gear output follows through the play (as `Actuator` does for its
+/// own steps). No rate limit, no missed steps.
+fn external_step(a: &mut Actuator, pos: i32) {
+    a.motor += pos - a.counter;
+    a.counter = pos;
+    let half = 0.5 * a.backlash;
+    let m = f64::from(a.motor);
+    if m - a.output > half {
+        a.output = m - half;
+    } else if a.output - m > half {
+        a.output = m + half;
     }
 }
 
