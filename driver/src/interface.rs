@@ -58,3 +58,20 @@ pub trait Driver {
         Vec::new()
     }
 }
+
+/// A boxed driver is a driver, so that a backend chosen at run time can sit inside the safety
+/// wrappers.
+impl<D: Driver + ?Sized> Driver for Box<D> {
+    fn name(&self) -> &str {
+        (**self).name()
+    }
+    fn write(&mut self, time_s: f64, period_s: f64, cmd: &MotorCommand) -> Result<(), DriverError> {
+        (**self).write(time_s, period_s, cmd)
+    }
+    fn read(&mut self, time_s: f64, period_s: f64) -> Result<DriverState, DriverError> {
+        (**self).read(time_s, period_s)
+    }
+    fn diagnostics(&self) -> Vec<(String, u64)> {
+        (**self).diagnostics()
+    }
+}
