@@ -476,7 +476,7 @@ impl Supervisor {
         ));
         match &self.run {
             Some(r) => out.push_str(&format!(
-                "run {} ({}): {}; progress {:.1}/{:.1} s; rows {}; {}\n",
+                "run {} ({}): {}; progress {:.1}/{:.1} s; recorded rows {}; accuracy over {}\n",
                 r.id,
                 r.name,
                 r.ended.map_or(
