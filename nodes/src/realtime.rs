@@ -64,3 +64,10 @@ pub fn apply(priority: i32, cpu: Option<usize>, lock: bool) -> RealtimeApplied {
     }
     r
 }
+
+/// Returns the calling thread to normal (SCHED_OTHER) scheduling.
+pub fn apply_normal() {
+    let p = libc::sched_param { sched_priority: 0 };
+    // SAFETY: plain syscall on this process.
+    unsafe { libc::sched_setscheduler(0, libc::SCHED_OTHER, &p) };
+}

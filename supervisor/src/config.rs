@@ -102,7 +102,7 @@ fn d_startup() -> f64 {
     10_000.0
 }
 fn d_rec() -> String {
-    "recordings".into()
+    "out/recordings".into()
 }
 fn d_robot() -> String {
     "configs/robot.toml".into()

@@ -44,6 +44,9 @@ struct Args {
     /// Robot configuration.
     #[arg(long, default_value = "configs/robot.toml")]
     robot: String,
+    /// SCHED_FIFO priority for every process of both transports (0 = normal scheduling).
+    #[arg(long, default_value_t = 0)]
+    rt_priority: i32,
     /// Skip the UDS baseline.
     #[arg(long)]
     no_uds: bool,
@@ -169,9 +172,11 @@ fn robot(path: &str) -> Result<Robot> {
 fn bench(a: &Args) -> Result<()> {
     let period_ns = (a.period_ms * 1e6) as u64;
     println!(
-        "# pcr-bench-latency: {} cycles per transport at a {} ms period ({} CPUs)",
+        "# pcr-bench-latency: {} cycles per transport at a {} ms period, SCHED_FIFO priority {} \
+         (0 = normal scheduling), {} CPUs",
         a.cycles,
         a.period_ms,
+        a.rt_priority,
         std::thread::available_parallelism().map_or(0, |n| n.get())
     );
     let ice = bench_iceoryx2(a, period_ns)?;
@@ -198,6 +203,8 @@ fn bench_iceoryx2(a: &Args, period_ns: u64) -> Result<(Hists, u64)> {
         a.period_ms.to_string(),
         "--robot".into(),
         a.robot.clone(),
+        "--rt-priority".into(),
+        a.rt_priority.to_string(),
     ];
     let mut kids = Kids(Vec::new());
     for b in ["pcr-driver", "pcr-ik", "pcr-planner"] {
@@ -296,6 +303,7 @@ fn from_bytes<T: Copy + Default>(b: &[u8]) -> T {
 
 fn uds_role(role: &str, dir: &Path, a: &Args) -> Result<()> {
     let robot = robot(&a.robot)?;
+    pcr_nodes::realtime::apply(a.rt_priority, None, false);
     let mut buf = [0u8; 4096];
     match role {
         "ik" => {
@@ -356,6 +364,8 @@ fn bench_uds(a: &Args, period_ns: u64) -> Result<(Hists, u64)> {
         kids.0.push(
             std::process::Command::new(&me)
                 .args(["--uds-role", role, "--robot", &a.robot])
+                .arg("--rt-priority")
+                .arg(a.rt_priority.to_string())
                 .arg("--period-ms")
                 .arg(a.period_ms.to_string())
                 .arg("--dir")
@@ -372,6 +382,7 @@ fn bench_uds(a: &Args, period_ns: u64) -> Result<(Hists, u64)> {
         std::thread::sleep(Duration::from_millis(10));
     }
     let tx = UnixDatagram::unbound()?;
+    let rt = pcr_nodes::realtime::apply(a.rt_priority, None, false);
     let mut interp = InterpolatorStep::new(InterimPathSource::new(), Pose::default());
     let mut h = Hists::new();
     let mut late_wakes = 0u64;
@@ -433,6 +444,10 @@ fn bench_uds(a: &Args, period_ns: u64) -> Result<(Hists, u64)> {
         std::thread::sleep(Duration::from_millis(1));
     }
     drop(kids);
+    if rt.priority > 0 {
+        // Back to normal scheduling for the rest of the run.
+        pcr_nodes::realtime::apply_normal();
+    }
     let _ = std::fs::remove_dir_all(&dir);
     Ok((h, late_wakes))
 }
