@@ -456,3 +456,62 @@ fn malformed_configs_are_refused_naming_the_key() {
         );
     }
 }
+
+#[test]
+fn a_killed_planner_aborts_the_run_and_the_robot_holds() {
+    let _g = lock();
+    let chain = Chain::new("plan", "heartbeat_timeout_ms = 2000.0", "");
+    let (mut sup, out, err) = chain.supervisor(&["--run", "circle"]);
+    let mut e = Vec::new();
+    assert!(
+        wait_for(
+            &err,
+            "run 1 (circle) started",
+            Duration::from_secs(60),
+            &mut e
+        ),
+        "{e:?}"
+    );
+    std::thread::sleep(Duration::from_secs(2));
+    let planner = chain.pid_of("planner").expect("planner pid");
+    kill(planner, libc::SIGKILL);
+    assert!(
+        wait_for(&err, "run 1 aborted", Duration::from_secs(5), &mut e),
+        "{e:?}"
+    );
+    let st = wait_exit(&mut sup, Duration::from_secs(30));
+    let mut o = Vec::new();
+    drain(&out, &mut o);
+    drain(&err, &mut e);
+    // The run failed (exit 1), the robot held: no row after the kill jumps.
+    assert_eq!(st.code(), Some(1), "{e:?}");
+    assert!(o.iter().any(|l| l.contains("aborted")), "{o:?}");
+    let rec = std::fs::read_dir(chain.dir.path().join("rec"))
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap()
+        .path();
+    let csv = std::fs::read_to_string(rec).unwrap();
+    let q: Vec<[i64; 3]> = csv
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.starts_with("t_s"))
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            [1, 2, 3].map(|k| f[k].parse().unwrap())
+        })
+        .collect();
+    // 600 steps/s at 20 ms: at most 12 steps per row (+1 for timing).
+    for w in q.windows(2) {
+        for k in 0..3 {
+            assert!(
+                (w[1][k] - w[0][k]).abs() <= 13,
+                "jump {:?} -> {:?}",
+                w[0],
+                w[1]
+            );
+        }
+    }
+    assert!(chain.leftovers().is_empty(), "{:?}", chain.leftovers());
+    assert_eq!(chain.processes_left(), 0);
+}
