@@ -126,7 +126,12 @@ pub struct InterpolatorStep<S> {
     offset: [f64; 3],
     seq: u64,
     done_sent: bool,
+    /// (seq, program time) of the last [`HISTORY`] setpoints, for [`Self::rewind_to_seq`].
+    history: [(u64, f64); HISTORY],
 }
+
+/// Setpoints remembered for rewinding (64 cycles = 1.28 s at 20 ms).
+pub const HISTORY: usize = 64;
 
 impl<S: SetpointSource> InterpolatorStep<S> {
     /// A step holding `home` until a program runs.
@@ -142,7 +147,25 @@ impl<S: SetpointSource> InterpolatorStep<S> {
             offset: [0.0; 3],
             seq: 0,
             done_sent: false,
+            history: [(0, 0.0); HISTORY],
         }
+    }
+
+    /// Moves the program back to the setpoint with sequence number `seq` (the last one the drive
+    /// executed), so that a paused program resumes from where the robot is rather than from
+    /// where the interpolator had got to. Only while running or paused and if `seq` is among the
+    /// last [`HISTORY`] setpoints; returns whether it rewound. Allocation-free.
+    pub fn rewind_to_seq(&mut self, seq: u64) -> bool {
+        if !matches!(self.state, planner_state::RUNNING | planner_state::PAUSED) || seq == 0 {
+            return false;
+        }
+        let (s, tau) = self.history[(seq % HISTORY as u64) as usize];
+        if s != seq || tau > self.tau_s {
+            return false;
+        }
+        self.tau_s = tau;
+        self.hold = self.source.sample(tau);
+        true
     }
 
     /// The wrapped source.
@@ -243,6 +266,7 @@ impl<S: SetpointSource> InterpolatorStep<S> {
             _ => {}
         }
         self.seq += 1;
+        self.history[(self.seq % HISTORY as u64) as usize] = (self.seq, self.tau_s);
         let p = self.hold;
         TaskSetpoint {
             t_s,
@@ -284,6 +308,29 @@ mod tests {
             .unwrap();
         let c = s.step(t + 1.02);
         assert!(c.x_mm != b.x_mm || c.y_mm != b.y_mm);
+    }
+
+    #[test]
+    fn rewind_returns_to_an_executed_setpoint() {
+        let mut s = InterpolatorStep::new(InterimPathSource::new(), Pose::default());
+        s.command(&simple_command(command_kind::RUN, program_id::CIRCLE, 1))
+            .unwrap();
+        let mut t = 0.0;
+        let mut at_60 = None;
+        for _ in 0..80 {
+            let sp = s.step(t);
+            if sp.seq == 60 {
+                at_60 = Some(sp);
+            }
+            t += 0.02;
+        }
+        s.command(&simple_command(command_kind::PAUSE, 0, 1))
+            .unwrap();
+        assert!(s.rewind_to_seq(60));
+        let a = at_60.unwrap();
+        let b = s.step(t);
+        assert_eq!((a.x_mm, a.y_mm), (b.x_mm, b.y_mm));
+        assert!(!s.rewind_to_seq(1), "too old");
     }
 
     #[test]

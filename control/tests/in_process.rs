@@ -101,3 +101,33 @@ fn stale_setpoints_hold_position_then_resume() {
     assert_eq!(out.state.flags & driver_flags::STALE_HOLD, 0);
     assert!(!c.driver.holding());
 }
+
+#[test]
+fn pause_after_lost_setpoints_resumes_from_the_executed_setpoint_without_error() {
+    let mut c = chain();
+    c.interp
+        .command(&simple_command(command_kind::RUN, program_id::CIRCLE, 1))
+        .unwrap();
+    let mut acc = pcr_control::Accuracy::default();
+    for _ in 0..150 {
+        acc.add(&c.cycle().unwrap().state);
+    }
+    // The IK "dies" for 5 cycles: the driver holds after 2.
+    let mut executed = 0;
+    for _ in 0..5 {
+        executed = c.cycle_with(true).unwrap().state.seq;
+    }
+    // The supervisor pauses; the planner rewinds to what the drive executed, then resumes.
+    c.interp
+        .command(&simple_command(command_kind::PAUSE, 0, 1))
+        .unwrap();
+    assert!(c.interp.rewind_to_seq(executed));
+    for _ in 0..10 {
+        acc.add(&c.cycle().unwrap().state);
+    }
+    let rest = c.run(&simple_command(command_kind::RESUME, 0, 1), 60.0, |_| {});
+    let rest = rest.unwrap();
+    assert!(acc.max_pos_mm < 0.5, "{acc}");
+    assert!(rest.max_pos_mm < 0.5, "{rest}");
+    assert!(rest.n > 100);
+}

@@ -8,8 +8,8 @@ use iceoryx2::prelude::*;
 use pcr_control::{InterimPathSource, InterpolatorStep};
 use pcr_kinematics::{Pose, Robot};
 use pcr_messages::{
-    monotonic_ns, services as s, Command, Correction, DriverStateMsg, Heartbeat, NodeKind,
-    PlannerStatus, TaskSetpoint,
+    command_kind, monotonic_ns, services as s, Command, Correction, DriverStateMsg, Heartbeat,
+    NodeKind, PlannerStatus, TaskSetpoint,
 };
 use pcr_nodes::{chain_time_s, ports::latest, CommonArgs, CycleStats};
 use pcr_robot::RobotConfig;
@@ -54,6 +54,7 @@ fn run(a: Args) -> Result<()> {
     let mut stats = CycleStats::new(kind, c.protocol_version, period_ns);
     let mut last_wake: Option<u64> = None;
     let mut last_state = u32::MAX;
+    let mut executed_seq = 0u64;
 
     let ws = WaitSetBuilder::new()
         .create::<ipc::Service>()
@@ -72,11 +73,25 @@ fn run(a: Args) -> Result<()> {
                 let wake = monotonic_ns();
                 let jitter = last_wake.map_or(0, |l| (wake - l).abs_diff(period_ns));
                 last_wake = Some(wake);
+                // Driver states first: the last setpoint the drive executed.
+                let newest_state = latest(&sub_state).ok().flatten();
+                if let Some(st) = &newest_state {
+                    executed_seq = st.seq;
+                }
                 while let Ok(Some(cmd)) = sub_cmd.receive() {
                     match interp.command(cmd.payload()) {
                         Ok(()) => {
                             commanded = true;
                             tracing::info!(kind = cmd.kind, run_id = cmd.run_id, "command");
+                            // A pause holds where the robot is: back to the setpoint the
+                            // drive executed last (it may have stopped on stale setpoints).
+                            if cmd.kind == command_kind::PAUSE && interp.rewind_to_seq(executed_seq)
+                            {
+                                tracing::info!(
+                                    seq = executed_seq,
+                                    "paused at the executed setpoint"
+                                );
+                            }
                         }
                         Err(e) => tracing::error!("command refused: {e}"),
                     }
@@ -84,7 +99,7 @@ fn run(a: Args) -> Result<()> {
                 if let Ok(Some(corr)) = latest(&sub_corr) {
                     interp.set_correction(&corr);
                 }
-                if let Ok(Some(st)) = latest(&sub_state) {
+                if let Some(st) = newest_state {
                     // Until the first command, hold where the robot is (after a restart the
                     // drive may be anywhere): FK of the reported positions.
                     if !commanded {
