@@ -47,7 +47,9 @@ pub fn startup(
     let node = ChainNode::new(&name, &args.prefix, args.protocol_version)?;
     let guard = ProtocolGuard::new(&node, kind)?;
     if let Err(m) = guard.handshake(std::time::Duration::from_millis(args.handshake_ms)) {
-        eprintln!("pcr-{}: error: {}", kind.name(), m.message);
+        // One write, so that concurrent processes' lines do not interleave.
+        let line = format!("pcr-{}: error: {}\n", kind.name(), m.message);
+        let _ = std::io::Write::write_all(&mut std::io::stderr(), line.as_bytes());
         std::process::exit(EXIT_VERSION_MISMATCH);
     }
     tracing::info!(
@@ -64,7 +66,7 @@ pub fn startup(
 pub fn recheck(guard: &ProtocolGuard) {
     guard.announce();
     if let Err(m) = guard.check() {
-        tracing::error!(peer_pid = m.peer.pid, "refusing peer: {}", m.message);
+        tracing::error!(peer_pid = m.peer.pid, "ignoring peer: {}", m.message);
     }
 }
 

@@ -318,6 +318,10 @@ impl Supervisor {
     }
 
     fn safe_stop(&mut self, why: String) {
+        if let Some(first) = &self.safe_stop {
+            eprintln!("pcr-supervisor: (already in safe stop: {first}) also: {why}");
+            return;
+        }
         eprintln!("pcr-supervisor: SAFE STOP: {why}");
         let _ = self
             .pub_cmd
@@ -583,6 +587,17 @@ impl Supervisor {
             let p = &mut self.procs[i];
             if let Some(child) = &mut p.child {
                 if let Ok(Some(status)) = child.try_wait() {
+                    if status.code() == Some(pcr_nodes::EXIT_VERSION_MISMATCH) {
+                        // Restarting the same binary cannot help.
+                        let name = p.name();
+                        p.child = None;
+                        p.gave_up = true;
+                        self.safe_stop(format!(
+                            "{name} refused to connect: protocol version mismatch (its binary \
+                             is from another revision); not restarting"
+                        ));
+                        continue;
+                    }
                     self.failed(i, format!("exited: {status}"));
                     continue;
                 }

@@ -515,3 +515,35 @@ fn a_killed_planner_aborts_the_run_and_the_robot_holds() {
     assert!(chain.leftovers().is_empty(), "{:?}", chain.leftovers());
     assert_eq!(chain.processes_left(), 0);
 }
+
+#[test]
+fn a_mismatched_binary_started_by_the_supervisor_is_not_restarted() {
+    let _g = lock();
+    // The IK of "another revision": it speaks protocol v2.
+    let chain = Chain::new("mism", "heartbeat_timeout_ms = 2000.0", "");
+    let text = std::fs::read_to_string(&chain.config).unwrap().replace(
+        "name = \"ik\"\n",
+        "name = \"ik\"\nargs = [\"--protocol-version\", \"2\"]\n",
+    );
+    std::fs::write(&chain.config, text).unwrap();
+    let (mut sup, _out, err) = chain.supervisor(&["--run", "paper"]);
+    let st = wait_exit(&mut sup, Duration::from_secs(60));
+    let mut e = Vec::new();
+    drain(&err, &mut e);
+    assert_eq!(st.code(), Some(2), "{e:?}");
+    assert!(
+        e.iter().any(|l| l.contains("protocol version mismatch")),
+        "{e:?}"
+    );
+    assert!(e.iter().any(|l| l.contains("SAFE STOP")), "{e:?}");
+    assert!(!e.iter().any(|l| l.contains("restart #")), "{e:?}");
+    // Only the stray binary refused; the processes of this revision connected.
+    for other in ["pcr-planner", "pcr-driver", "pcr-mocap"] {
+        assert!(
+            !e.iter().any(|l| l.starts_with(&format!("{other}: error"))),
+            "{e:?}"
+        );
+    }
+    assert!(chain.leftovers().is_empty(), "{:?}", chain.leftovers());
+    assert_eq!(chain.processes_left(), 0);
+}
