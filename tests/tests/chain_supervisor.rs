@@ -547,3 +547,60 @@ fn a_mismatched_binary_started_by_the_supervisor_is_not_restarted() {
     assert!(chain.leftovers().is_empty(), "{:?}", chain.leftovers());
     assert_eq!(chain.processes_left(), 0);
 }
+
+#[test]
+fn ctl_runs_a_list_of_moves_with_pause_and_resume() {
+    let _g = lock();
+    let chain = Chain::new("ctl", "heartbeat_timeout_ms = 2000.0", "");
+    let (mut sup, out, err) = chain.supervisor(&[]);
+    let mut e = Vec::new();
+    assert!(wait_for(
+        &err,
+        "started mocap",
+        Duration::from_secs(30),
+        &mut e
+    ));
+    let end = Instant::now() + Duration::from_secs(30);
+    while !chain.ctl("status").starts_with("state: ready") {
+        assert!(Instant::now() < end, "chain not ready");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let r = chain.ctl("run moves line 20 10 0 30; dwell 0.5; circle 0 0 20 40; line 0 0 0 30");
+    assert!(r.contains("run 1 (moves) started"), "{r}");
+    assert!(
+        chain.ctl("run paper").starts_with("error"),
+        "one run at a time"
+    );
+    std::thread::sleep(Duration::from_millis(500));
+    assert_eq!(chain.ctl("pause").trim(), "paused");
+    std::thread::sleep(Duration::from_millis(200));
+    let a = chain.ctl("status");
+    assert!(a.contains("run 1 (moves): paused"), "{a}");
+    std::thread::sleep(Duration::from_millis(500));
+    let b = chain.ctl("status");
+    let progress = |s: &str| -> String {
+        s.split("progress ")
+            .nth(1)
+            .unwrap()
+            .split('/')
+            .next()
+            .unwrap()
+            .to_string()
+    };
+    assert_eq!(
+        progress(&a),
+        progress(&b),
+        "paused program time must not advance"
+    );
+    assert_eq!(chain.ctl("resume").trim(), "resumed");
+    let mut o = Vec::new();
+    assert!(
+        wait_for(&out, "run 1 (moves): done", Duration::from_secs(30), &mut o),
+        "{o:?}"
+    );
+    assert!(chain.ctl("bogus").starts_with("error"));
+    assert!(chain.ctl("shutdown").contains("shutting down"));
+    let st = wait_exit(&mut sup, Duration::from_secs(30));
+    assert!(st.success(), "{st:?}");
+    assert!(chain.leftovers().is_empty(), "{:?}", chain.leftovers());
+}
