@@ -166,3 +166,43 @@ pub fn latest<T: Debug + ZeroCopySend + Copy + 'static>(
     }
     Ok(last)
 }
+
+/// Removes the iceoryx2 files left under `prefix` once no node of the prefix is alive (the
+/// global management segment is not removed by iceoryx2 itself). Returns how many were removed.
+pub fn remove_leftovers(prefix: &str) -> usize {
+    let Ok(cfg) = iox_config(prefix) else {
+        return 0;
+    };
+    let mut alive = 0;
+    let _ = Node::<ipc::Service>::list(&cfg, |s| {
+        match s {
+            NodeState::Alive(_) => alive += 1,
+            NodeState::Dead(d) => {
+                let _ = d.try_remove_stale_resources();
+            }
+            _ => {}
+        }
+        CallbackProgression::Continue
+    });
+    if alive > 0 {
+        return 0;
+    }
+    let mut n = 0;
+    for dir in ["/dev/shm", "/tmp/iceoryx2"] {
+        let Ok(rd) = std::fs::read_dir(dir) else {
+            continue;
+        };
+        for e in rd.flatten() {
+            if e.file_name().to_string_lossy().starts_with(prefix) {
+                let p = e.path();
+                let ok = if p.is_dir() {
+                    std::fs::remove_dir_all(&p).is_ok()
+                } else {
+                    std::fs::remove_file(&p).is_ok()
+                };
+                n += usize::from(ok);
+            }
+        }
+    }
+    n
+}

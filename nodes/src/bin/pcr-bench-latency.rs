@@ -196,6 +196,14 @@ fn bench(a: &Args) -> Result<()> {
 
 fn bench_iceoryx2(a: &Args, period_ns: u64) -> Result<(Hists, u64)> {
     let prefix = format!("pcrbench{}_", std::process::id());
+    let r = bench_iceoryx2_in(a, period_ns, &prefix);
+    // Every node of the prefix is gone now: remove what iceoryx2 leaves behind.
+    pcr_nodes::ports::remove_leftovers(&prefix);
+    r
+}
+
+fn bench_iceoryx2_in(a: &Args, period_ns: u64, prefix: &str) -> Result<(Hists, u64)> {
+    let prefix = prefix.to_string();
     let common = [
         "--prefix".to_string(),
         prefix.clone(),
