@@ -720,7 +720,13 @@ impl Supervisor {
         let _ = run.recorder.finish();
         println!("run {} ({}): {how}", run.id, run.name);
         println!("recording: {} ({rows} rows)", run.path.display());
-        println!(
+        if run.acc.n == 0 {
+            println!(
+                "path accuracy: not measured (no measured pose: the serial backend has no pose \
+                 sensor until the mocap bridge exists)"
+            );
+        } else {
+            println!(
             "path accuracy (planned vs measured, {} rows): position mean {:.3} mm, max {:.3} mm, \
              RMS {:.3} mm; orientation mean {:.3} deg, max {:.3} deg, RMS {:.3} deg",
             run.acc.n,
@@ -731,6 +737,7 @@ impl Supervisor {
             run.acc.max_phi_deg,
             run.acc.rms_phi_deg()
         );
+        }
         for p in &self.procs {
             println!(
                 "process {}: restarts {}, deadline misses {} over {} cycles",
