@@ -104,6 +104,7 @@ pub struct Supervisor {
     requested_run_started: bool,
     last_hello: Instant,
     start: Instant,
+    last_summary: Option<String>,
 }
 
 fn ms(v: f64) -> Duration {
@@ -191,6 +192,7 @@ impl Supervisor {
             requested_run_started: false,
             last_hello: now,
             start: now,
+            last_summary: None,
         })
     }
 
@@ -498,6 +500,9 @@ impl Supervisor {
             )),
             None => out.push_str("run: none\n"),
         }
+        if let Some(l) = &self.last_summary {
+            out.push_str(&format!("last run: {l}\n"));
+        }
         for p in &self.procs {
             let h = &p.hb;
             out.push_str(&format!(
@@ -719,6 +724,14 @@ impl Supervisor {
         let rows = run.recorder.rows();
         let _ = run.recorder.finish();
         println!("run {} ({}): {how}", run.id, run.name);
+        self.last_summary = Some(format!(
+            "{} ({}): {how}; {} rows in {}; {}",
+            run.id,
+            run.name,
+            rows,
+            run.path.display(),
+            run.acc
+        ));
         println!("recording: {} ({rows} rows)", run.path.display());
         if run.acc.n == 0 {
             println!(

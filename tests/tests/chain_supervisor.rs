@@ -598,6 +598,8 @@ fn ctl_runs_a_list_of_moves_with_pause_and_resume() {
         wait_for(&out, "run 1 (moves): done", Duration::from_secs(30), &mut o),
         "{o:?}"
     );
+    let st = chain.ctl("status");
+    assert!(st.contains("last run: 1 (moves): done"), "{st}");
     assert!(chain.ctl("bogus").starts_with("error"));
     assert!(chain.ctl("shutdown").contains("shutting down"));
     let st = wait_exit(&mut sup, Duration::from_secs(30));
