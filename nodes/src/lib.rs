@@ -82,3 +82,30 @@ pub fn log_end(kind: pcr_messages::NodeKind, r: iceoryx2::waitset::WaitSetRunRes
         }
     }
 }
+
+/// Runs a WaitSet loop until the callback stops it or SIGINT/SIGTERM arrives.
+///
+/// iceoryx2 reports any EINTR of its wait as [`WaitSetRunResult::Interrupt`], including the one
+/// Linux raises when a stopped process is continued (SIGSTOP then SIGCONT): that must not end the
+/// process. A real SIGINT/SIGTERM is still pending then, and the next wait reports it as
+/// [`WaitSetRunResult::TerminationRequest`], so an `Interrupt` simply waits again.
+///
+/// [`WaitSetRunResult::Interrupt`]: iceoryx2::waitset::WaitSetRunResult::Interrupt
+/// [`WaitSetRunResult::TerminationRequest`]: iceoryx2::waitset::WaitSetRunResult::TerminationRequest
+pub fn run_waitset<F>(
+    ws: &iceoryx2::waitset::WaitSet<iceoryx2::prelude::ipc::Service>,
+    mut f: F,
+) -> Result<iceoryx2::waitset::WaitSetRunResult, iceoryx2::waitset::WaitSetRunError>
+where
+    F: FnMut(
+        iceoryx2::prelude::WaitSetAttachmentId<iceoryx2::prelude::ipc::Service>,
+    ) -> iceoryx2::prelude::CallbackProgression,
+{
+    use iceoryx2::waitset::WaitSetRunResult as R;
+    loop {
+        match ws.wait_and_process(&mut f)? {
+            R::Interrupt => continue,
+            r => return Ok(r),
+        }
+    }
+}

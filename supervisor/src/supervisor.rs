@@ -81,6 +81,8 @@ struct Run {
     user_paused: bool,
     duration_s: f64,
     progress_s: f64,
+    /// The newest driver state of this run reports the motors at rest.
+    settled: bool,
 }
 
 /// The supervisor.
@@ -403,6 +405,7 @@ impl Supervisor {
             user_paused: false,
             duration_s: 0.0,
             progress_s: 0.0,
+            settled: false,
         });
         Ok(format!(
             "run {id} ({name}) started; recording {}",
@@ -647,14 +650,30 @@ impl Supervisor {
             }
         }
         // Driver states: record.
+        let mut stop = false;
         while let Ok(Some(smp)) = self.sub_state.receive() {
             if let Some(run) = &mut self.run {
                 let st = smp.payload();
-                if st.run_id == run.id && run.ended.is_none_or(|e| now - e.0 < ms(300.0)) {
+                if st.run_id == run.id && !run_over(run, now) {
                     let _ = run.recorder.row(st);
                     run.acc.add(st);
+                    run.settled = st.flags & pcr_messages::driver_flags::MOVING == 0;
+                    if st.flags & pcr_messages::driver_flags::FAULT != 0 && run.ended.is_none() {
+                        run.ended = Some((now, "drive fault"));
+                        eprintln!(
+                            "pcr-supervisor: run {} stopped: drive fault (latched in the drive, \
+                             which holds position; clear it at the drive)",
+                            run.id
+                        );
+                        stop = true;
+                    }
                 }
             }
+        }
+        if stop {
+            let _ = self
+                .pub_cmd
+                .send_copy(simple_command(command_kind::STOP, 0, 0));
         }
         // Planner status.
         while let Ok(Some(smp)) = self.sub_status.receive() {
@@ -700,10 +719,7 @@ impl Supervisor {
     }
 
     fn finish_run_if_over(&mut self, now: Instant) {
-        let over = self
-            .run
-            .as_ref()
-            .is_some_and(|r| r.ended.is_some_and(|e| now - e.0 >= ms(300.0)));
+        let over = self.run.as_ref().is_some_and(|r| run_over(r, now));
         // A run without progress for far longer than planned is stuck.
         let stuck = self.run.as_ref().is_some_and(|r| {
             r.ended.is_none()
@@ -815,6 +831,15 @@ impl Supervisor {
     }
 }
 
+/// A run is over (and its recording closed) at least 300 ms after it ended, once the motors are
+/// at rest, or 5 s after it ended if they do not come to rest.
+fn run_over(r: &Run, now: Instant) -> bool {
+    r.ended.is_some_and(|e| {
+        let after = now - e.0;
+        after >= ms(300.0) && (r.settled || after >= ms(5000.0))
+    })
+}
+
 /// Runs the supervisor until Ctrl-C / SIGTERM, `shutdown`, or the end of a `--run` program.
 /// Returns the process exit code.
 pub fn run(cfg: SupervisorConfig, opts: Options) -> Result<i32> {
@@ -826,17 +851,16 @@ pub fn run(cfg: SupervisorConfig, opts: Options) -> Result<i32> {
     let tick = ws
         .attach_interval(Duration::from_millis(20))
         .map_err(|e| anyhow!("interval: {e:?}"))?;
-    let r = ws
-        .wait_and_process(|id| {
-            if id.has_event_from(&tick) {
-                sup.tick();
-                if sup.exit.is_some() {
-                    return CallbackProgression::Stop;
-                }
+    let r = pcr_nodes::run_waitset(&ws, |id| {
+        if id.has_event_from(&tick) {
+            sup.tick();
+            if sup.exit.is_some() {
+                return CallbackProgression::Stop;
             }
-            CallbackProgression::Continue
-        })
-        .map_err(|e| anyhow!("waitset: {e:?}"))?;
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(|e| anyhow!("waitset: {e:?}"))?;
     let code = match r {
         WaitSetRunResult::Interrupt | WaitSetRunResult::TerminationRequest => {
             eprintln!("pcr-supervisor: {r:?}: shutting down");

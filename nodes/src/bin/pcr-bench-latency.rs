@@ -244,46 +244,42 @@ fn bench_iceoryx2_in(a: &Args, period_ns: u64, prefix: &str) -> Result<(Hists, u
     let start = Instant::now();
     let mut run_id = 0u32;
     let mut warm = 0u64;
-    let r = ws
-        .wait_and_process(|id| {
-            if id.has_event_from(&ev) {
-                let _ = listener.try_wait(|_| {});
-                while let Ok(Some(smp)) = sub.receive() {
-                    let m = smp.payload();
-                    if m.stamps.drv_cmd_ns != 0 && m.stamps.interp_pub_ns != 0 {
-                        // Skip the first cycles (start-up, page faults).
-                        warm += 1;
-                        if warm > 100 {
-                            h.add(&m.stamps, m.seq, period_ns);
-                        }
+    let r = pcr_nodes::run_waitset(&ws, |id| {
+        if id.has_event_from(&ev) {
+            let _ = listener.try_wait(|_| {});
+            while let Ok(Some(smp)) = sub.receive() {
+                let m = smp.payload();
+                if m.stamps.drv_cmd_ns != 0 && m.stamps.interp_pub_ns != 0 {
+                    // Skip the first cycles (start-up, page faults).
+                    warm += 1;
+                    if warm > 100 {
+                        h.add(&m.stamps, m.seq, period_ns);
                     }
                 }
-                if h.cycles >= a.cycles {
-                    return CallbackProgression::Stop;
-                }
             }
-            if id.has_event_from(&tick) {
-                while let Ok(Some(smp)) = sub_hb.receive() {
-                    misses.insert(smp.pid, smp.deadline_misses);
-                }
-                // (Re)start the paper program so that the IK works on a moving target.
-                run_id += 1;
-                if run_id % 40 == 1 {
-                    let _ = pub_cmd.send_copy(simple_command(
-                        command_kind::RUN,
-                        program_id::PAPER,
-                        run_id,
-                    ));
-                }
-                if start.elapsed()
-                    > Duration::from_secs(30) + Duration::from_nanos(period_ns * a.cycles * 3)
-                {
-                    return CallbackProgression::Stop;
-                }
+            if h.cycles >= a.cycles {
+                return CallbackProgression::Stop;
             }
-            CallbackProgression::Continue
-        })
-        .map_err(|e| anyhow!("{e:?}"))?;
+        }
+        if id.has_event_from(&tick) {
+            while let Ok(Some(smp)) = sub_hb.receive() {
+                misses.insert(smp.pid, smp.deadline_misses);
+            }
+            // (Re)start the paper program so that the IK works on a moving target.
+            run_id += 1;
+            if run_id % 40 == 1 {
+                let _ =
+                    pub_cmd.send_copy(simple_command(command_kind::RUN, program_id::PAPER, run_id));
+            }
+            if start.elapsed()
+                > Duration::from_secs(30) + Duration::from_nanos(period_ns * a.cycles * 3)
+            {
+                return CallbackProgression::Stop;
+            }
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(|e| anyhow!("{e:?}"))?;
     if !matches!(r, WaitSetRunResult::StopRequest) {
         bail!("interrupted");
     }

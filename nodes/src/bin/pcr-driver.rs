@@ -11,6 +11,7 @@ use clap::{Parser, ValueEnum};
 use iceoryx2::prelude::*;
 use pcr_control::{
     max_step_rate, safety_stack, DriverStep, FkPoseSensor, IdealDrive, NoPoseSensor, PoseSensor,
+    SafeDriver,
 };
 use pcr_driver::{Driver, SerialConfig, SerialDriver};
 use pcr_kinematics::Robot;
@@ -66,8 +67,9 @@ fn run(a: Args) -> Result<()> {
                     .kappa_to_steps(i, robot.home_kappa[i])
                     .map_or(0, |s| s.round() as i32)
             });
+            let start = sim_start(&cn, home)?;
             let drv = safety_stack(
-                IdealDrive::new(home, max_step_rate(&robot)),
+                IdealDrive::new(start, max_step_rate(&robot)),
                 &robot,
                 watchdog_s,
             );
@@ -84,11 +86,28 @@ fn run(a: Args) -> Result<()> {
     }
 }
 
+/// Where the simulated motors are when this process starts. Real motors keep their position
+/// when the driver process restarts; the interim plant lives inside this process, so after a
+/// restart it adopts the setpoint the chain is holding (the supervisor pauses the program at the
+/// setpoint the previous driver executed last). On a fresh chain nobody publishes yet: home.
+fn sim_start(cn: &ChainNode, home: [i32; 3]) -> Result<[i32; 3]> {
+    let sub = cn.subscriber::<JointSetpoint>(s::JOINT_SETPOINT)?;
+    let end = std::time::Instant::now() + std::time::Duration::from_millis(200);
+    while std::time::Instant::now() < end {
+        if let Ok(Some(j)) = latest(&sub) {
+            tracing::info!(steps = ?j.steps, "sim: adopting the chain's held setpoint as the motor positions");
+            return Ok(j.steps);
+        }
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    Ok(home)
+}
+
 fn serve<D: Driver, P: PoseSensor>(
     c: &CommonArgs,
     cn: ChainNode,
     guard: ProtocolGuard,
-    mut step: DriverStep<D, P>,
+    mut step: DriverStep<SafeDriver<D>, P>,
 ) -> Result<()> {
     let kind = NodeKind::Driver;
     let sub = cn.subscriber::<JointSetpoint>(s::JOINT_SETPOINT)?;
@@ -116,54 +135,61 @@ fn serve<D: Driver, P: PoseSensor>(
         .attach_interval(c.heartbeat())
         .map_err(|e| anyhow!("interval: {e:?}"))?;
 
-    let r = ws
-        .wait_and_process(|id| {
-            let mut run = |input: Option<&JointSetpoint>| -> bool {
-                match step.step(chain_time_s(), input) {
-                    Ok(st) => {
-                        let _ = pub_st.send_copy(st);
-                        let _ = notify.notify();
-                        true
-                    }
-                    Err(e) => {
-                        tracing::error!(driver = step.driver().name(), "driver: {e}");
-                        if matches!(e, pcr_driver::DriverError::Transport(_)) {
-                            fatal = Some(anyhow!("driver transport: {e}"));
-                            return false;
-                        }
-                        true
-                    }
+    let r = pcr_nodes::run_waitset(&ws, |id| {
+        let mut run = |input: Option<&JointSetpoint>| -> bool {
+            let mut r = step.step(chain_time_s(), input);
+            if r.is_err() && step.driver().tripped() {
+                // This process stalled longer than the watchdog (it has held the drive
+                // meanwhile): re-arm and carry on; the rate limit bounds any catch-up.
+                tracing::warn!("driver process stalled: watchdog re-armed");
+                step.driver_mut().reset();
+                r = step.step(chain_time_s(), input);
+            }
+            match r {
+                Ok(st) => {
+                    let _ = pub_st.send_copy(st);
+                    let _ = notify.notify();
+                    true
                 }
-            };
-            if id.has_event_from(&ev) {
-                let _ = listener.try_wait(|_| {});
-                let rx = monotonic_ns();
-                if let Ok(Some(mut j)) = latest(&sub) {
-                    j.stamps.drv_rx_ns = rx;
-                    fresh_since_tick = true;
-                    if !run(Some(&j)) {
-                        return CallbackProgression::Stop;
+                Err(e) => {
+                    tracing::error!(driver = step.driver().name(), "driver: {e}");
+                    if matches!(e, pcr_driver::DriverError::Transport(_)) {
+                        fatal = Some(anyhow!("driver transport: {e}"));
+                        return false;
                     }
-                    let hop = rx.saturating_sub(j.stamps.ik_pub_ns);
-                    stats.record(monotonic_ns() - rx, hop);
+                    true
                 }
             }
-            if id.has_event_from(&tick) {
-                if !fresh_since_tick {
-                    stats.stale_input();
-                    if !run(None) {
-                        return CallbackProgression::Stop;
-                    }
+        };
+        if id.has_event_from(&ev) {
+            let _ = listener.try_wait(|_| {});
+            let rx = monotonic_ns();
+            if let Ok(Some(mut j)) = latest(&sub) {
+                j.stamps.drv_rx_ns = rx;
+                fresh_since_tick = true;
+                if !run(Some(&j)) {
+                    return CallbackProgression::Stop;
                 }
-                fresh_since_tick = false;
+                let hop = rx.saturating_sub(j.stamps.ik_pub_ns);
+                stats.record(monotonic_ns() - rx, hop);
             }
-            if id.has_event_from(&hb) {
-                let _ = pub_hb.send_copy(stats.heartbeat(step.holding()));
-                pcr_nodes::recheck(&guard);
+        }
+        if id.has_event_from(&tick) {
+            if !fresh_since_tick {
+                stats.stale_input();
+                if !run(None) {
+                    return CallbackProgression::Stop;
+                }
             }
-            CallbackProgression::Continue
-        })
-        .map_err(|e| anyhow!("waitset: {e:?}"))?;
+            fresh_since_tick = false;
+        }
+        if id.has_event_from(&hb) {
+            let _ = pub_hb.send_copy(stats.heartbeat(step.holding()));
+            pcr_nodes::recheck(&guard);
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(|e| anyhow!("waitset: {e:?}"))?;
     pcr_nodes::log_end(kind, r);
     eprintln!("{}", stats.summary());
     match fatal {

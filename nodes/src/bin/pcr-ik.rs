@@ -56,34 +56,33 @@ fn run(a: Args) -> Result<()> {
         .attach_interval(c.heartbeat())
         .map_err(|e| anyhow!("interval: {e:?}"))?;
 
-    let r = ws
-        .wait_and_process(|id| {
-            if id.has_event_from(&ev) {
-                // Level-triggered: drain the event before anything else.
-                let _ = listener.try_wait(|_| {});
-                let rx = monotonic_ns();
-                if let Ok(Some(mut sp)) = latest(&sub) {
-                    last_rx = rx;
-                    sp.stamps.ik_rx_ns = rx;
-                    let mut j = ik.step(&sp);
-                    j.stamps.ik_pub_ns = monotonic_ns();
-                    let _ = pub_j.send_copy(j);
-                    let _ = notify.notify();
-                    let hop = rx.saturating_sub(sp.stamps.interp_pub_ns);
-                    stats.record(monotonic_ns() - rx, hop);
-                }
+    let r = pcr_nodes::run_waitset(&ws, |id| {
+        if id.has_event_from(&ev) {
+            // Level-triggered: drain the event before anything else.
+            let _ = listener.try_wait(|_| {});
+            let rx = monotonic_ns();
+            if let Ok(Some(mut sp)) = latest(&sub) {
+                last_rx = rx;
+                sp.stamps.ik_rx_ns = rx;
+                let mut j = ik.step(&sp);
+                j.stamps.ik_pub_ns = monotonic_ns();
+                let _ = pub_j.send_copy(j);
+                let _ = notify.notify();
+                let hop = rx.saturating_sub(sp.stamps.interp_pub_ns);
+                stats.record(monotonic_ns() - rx, hop);
             }
-            if id.has_event_from(&hb) {
-                let stale = monotonic_ns() - last_rx > 2 * period_ns;
-                if stale {
-                    stats.stale_input();
-                }
-                let _ = pub_hb.send_copy(stats.heartbeat(stale));
-                pcr_nodes::recheck(&guard);
+        }
+        if id.has_event_from(&hb) {
+            let stale = monotonic_ns() - last_rx > 2 * period_ns;
+            if stale {
+                stats.stale_input();
             }
-            CallbackProgression::Continue
-        })
-        .map_err(|e| anyhow!("waitset: {e:?}"))?;
+            let _ = pub_hb.send_copy(stats.heartbeat(stale));
+            pcr_nodes::recheck(&guard);
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(|e| anyhow!("waitset: {e:?}"))?;
     pcr_nodes::log_end(kind, r);
     eprintln!("{} ({} IK failures)", stats.summary(), ik.failures());
     Ok(())

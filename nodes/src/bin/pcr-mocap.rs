@@ -57,30 +57,29 @@ fn run(a: Args) -> Result<()> {
     let hb = ws
         .attach_interval(c.heartbeat())
         .map_err(|e| anyhow!("interval: {e:?}"))?;
-    let r = ws
-        .wait_and_process(|id| {
-            if id.has_event_from(&ev) {
-                let _ = listener.try_wait(|_| {});
-                let rx = monotonic_ns();
-                if let Ok(Some(st)) = latest(&sub) {
-                    last_rx = rx;
-                    let m = measured_of(&st);
-                    let _ = pub_m.send_copy(m);
-                    let _ = pub_c.send_copy(corr.step(&m, &st.planned));
-                    stats.record(monotonic_ns() - rx, 0);
-                }
+    let r = pcr_nodes::run_waitset(&ws, |id| {
+        if id.has_event_from(&ev) {
+            let _ = listener.try_wait(|_| {});
+            let rx = monotonic_ns();
+            if let Ok(Some(st)) = latest(&sub) {
+                last_rx = rx;
+                let m = measured_of(&st);
+                let _ = pub_m.send_copy(m);
+                let _ = pub_c.send_copy(corr.step(&m, &st.planned));
+                stats.record(monotonic_ns() - rx, 0);
             }
-            if id.has_event_from(&hb) {
-                let stale = monotonic_ns() - last_rx > 2 * period_ns;
-                if stale {
-                    stats.stale_input();
-                }
-                let _ = pub_hb.send_copy(stats.heartbeat(stale));
-                pcr_nodes::recheck(&guard);
+        }
+        if id.has_event_from(&hb) {
+            let stale = monotonic_ns() - last_rx > 2 * period_ns;
+            if stale {
+                stats.stale_input();
             }
-            CallbackProgression::Continue
-        })
-        .map_err(|e| anyhow!("waitset: {e:?}"))?;
+            let _ = pub_hb.send_copy(stats.heartbeat(stale));
+            pcr_nodes::recheck(&guard);
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(|e| anyhow!("waitset: {e:?}"))?;
     pcr_nodes::log_end(kind, r);
     eprintln!("{}", stats.summary());
     Ok(())

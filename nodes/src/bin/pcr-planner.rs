@@ -5,11 +5,11 @@
 use anyhow::{anyhow, Context, Result};
 use clap::Parser;
 use iceoryx2::prelude::*;
-use pcr_control::{InterimPathSource, InterpolatorStep};
+use pcr_control::{simple_command, InterimPathSource, InterpolatorStep};
 use pcr_kinematics::{Pose, Robot};
 use pcr_messages::{
-    command_kind, monotonic_ns, services as s, Command, Correction, DriverStateMsg, Heartbeat,
-    NodeKind, PlannerStatus, TaskSetpoint,
+    command_kind, driver_flags, monotonic_ns, planner_state, services as s, Command, Correction,
+    DriverStateMsg, Heartbeat, NodeKind, PlannerStatus, TaskSetpoint,
 };
 use pcr_nodes::{chain_time_s, ports::latest, CommonArgs, CycleStats};
 use pcr_robot::RobotConfig;
@@ -55,6 +55,9 @@ fn run(a: Args) -> Result<()> {
     let mut last_wake: Option<u64> = None;
     let mut last_state = u32::MAX;
     let mut executed_seq = 0u64;
+    let mut last_state_ns = monotonic_ns();
+    let mut drive_holding = false;
+    let mut auto_paused = false;
 
     let ws = WaitSetBuilder::new()
         .create::<ipc::Service>()
@@ -66,70 +69,85 @@ fn run(a: Args) -> Result<()> {
         .attach_interval(c.heartbeat())
         .map_err(|e| anyhow!("interval: {e:?}"))?;
 
-    let r = ws
-        .wait_and_process(|id| {
-            let t = chain_time_s();
-            if id.has_event_from(&tick) {
-                let wake = monotonic_ns();
-                let jitter = last_wake.map_or(0, |l| (wake - l).abs_diff(period_ns));
-                last_wake = Some(wake);
-                // Driver states first: the last setpoint the drive executed.
-                let newest_state = latest(&sub_state).ok().flatten();
-                if let Some(st) = &newest_state {
-                    executed_seq = st.seq;
-                }
-                while let Ok(Some(cmd)) = sub_cmd.receive() {
-                    match interp.command(cmd.payload()) {
-                        Ok(()) => {
-                            commanded = true;
-                            tracing::info!(kind = cmd.kind, run_id = cmd.run_id, "command");
-                            // A pause holds where the robot is: back to the setpoint the
-                            // drive executed last (it may have stopped on stale setpoints).
-                            if cmd.kind == command_kind::PAUSE && interp.rewind_to_seq(executed_seq)
-                            {
-                                tracing::info!(
-                                    seq = executed_seq,
-                                    "paused at the executed setpoint"
-                                );
-                            }
+    let r = pcr_nodes::run_waitset(&ws, |id| {
+        let t = chain_time_s();
+        if id.has_event_from(&tick) {
+            let wake = monotonic_ns();
+            let jitter = last_wake.map_or(0, |l| (wake - l).abs_diff(period_ns));
+            last_wake = Some(wake);
+            // Driver states first: the last setpoint the drive executed.
+            let newest_state = latest(&sub_state).ok().flatten();
+            if let Some(st) = &newest_state {
+                executed_seq = st.seq;
+                last_state_ns = wake;
+                drive_holding = st.flags & driver_flags::STALE_HOLD != 0;
+            }
+            while let Ok(Some(cmd)) = sub_cmd.receive() {
+                match interp.command(cmd.payload()) {
+                    Ok(()) => {
+                        commanded = true;
+                        tracing::info!(kind = cmd.kind, run_id = cmd.run_id, "command");
+                        // A pause holds where the robot is: back to the setpoint the
+                        // drive executed last (it may have stopped on stale setpoints).
+                        if cmd.kind == command_kind::PAUSE {
+                            auto_paused = false;
                         }
-                        Err(e) => tracing::error!("command refused: {e}"),
-                    }
-                }
-                if let Ok(Some(corr)) = latest(&sub_corr) {
-                    interp.set_correction(&corr);
-                }
-                if let Some(st) = newest_state {
-                    // Until the first command, hold where the robot is (after a restart the
-                    // drive may be anywhere): FK of the reported positions.
-                    if !commanded {
-                        let kappa =
-                            std::array::from_fn(|i| robot.steps_to_kappa(i, st.steps[i] as f64));
-                        if let Ok(p) = robot.fk_warm(&kappa, &hold_guess) {
-                            hold_guess = p;
-                            interp.set_hold(p);
+                        if cmd.kind == command_kind::PAUSE && interp.rewind_to_seq(executed_seq) {
+                            tracing::info!(seq = executed_seq, "paused at the executed setpoint");
                         }
                     }
+                    Err(e) => tracing::error!("command refused: {e}"),
                 }
-                let mut sp = interp.step(t);
-                sp.stamps.interp_pub_ns = monotonic_ns();
-                let _ = pub_sp.send_copy(sp);
-                let _ = notify.notify();
-                let status = interp.status(t);
-                if status.state != last_state {
-                    last_state = status.state;
-                    let _ = pub_status.send_copy(status);
+            }
+            if let Ok(Some(corr)) = latest(&sub_corr) {
+                interp.set_correction(&corr);
+            }
+            if let Some(st) = newest_state {
+                // Until the first command, hold where the robot is (after a restart the
+                // drive may be anywhere): FK of the reported positions.
+                if !commanded {
+                    let kappa =
+                        std::array::from_fn(|i| robot.steps_to_kappa(i, st.steps[i] as f64));
+                    if let Ok(p) = robot.fk_warm(&kappa, &hold_guess) {
+                        hold_guess = p;
+                        interp.set_hold(p);
+                    }
                 }
-                stats.record(monotonic_ns() - wake, jitter);
             }
-            if id.has_event_from(&hb) {
-                let _ = pub_hb.send_copy(stats.heartbeat(false));
-                let _ = pub_status.send_copy(interp.status(t));
-                pcr_nodes::recheck(&guard);
+            // Self-protection: while a program runs, the drive must follow. If its states stop
+            // (driver stalled or dead) or it holds on stale setpoints (IK gone), pause at the
+            // setpoint it executed last; resume once it follows again.
+            let drive_ok = wake.saturating_sub(last_state_ns) <= 3 * period_ns && !drive_holding;
+            let state = interp.status(t).state;
+            if state == planner_state::RUNNING && !drive_ok {
+                let _ = interp.command(&simple_command(command_kind::PAUSE, 0, 0));
+                interp.rewind_to_seq(executed_seq);
+                auto_paused = true;
+                tracing::warn!(seq = executed_seq, "drive not following: program paused");
+            } else if auto_paused && drive_ok && state == planner_state::PAUSED {
+                let _ = interp.command(&simple_command(command_kind::RESUME, 0, 0));
+                auto_paused = false;
+                tracing::info!("drive following again: program resumed");
             }
-            CallbackProgression::Continue
-        })
-        .map_err(|e| anyhow!("waitset: {e:?}"))?;
+            let mut sp = interp.step(t);
+            sp.stamps.interp_pub_ns = monotonic_ns();
+            let _ = pub_sp.send_copy(sp);
+            let _ = notify.notify();
+            let status = interp.status(t);
+            if status.state != last_state {
+                last_state = status.state;
+                let _ = pub_status.send_copy(status);
+            }
+            stats.record(monotonic_ns() - wake, jitter);
+        }
+        if id.has_event_from(&hb) {
+            let _ = pub_hb.send_copy(stats.heartbeat(false));
+            let _ = pub_status.send_copy(interp.status(t));
+            pcr_nodes::recheck(&guard);
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(|e| anyhow!("waitset: {e:?}"))?;
     pcr_nodes::log_end(kind, r);
     eprintln!("{}", stats.summary());
     Ok(())
