@@ -1,1 +1,40 @@
-//! Control steps and the in-process runtime (work in progress).
+//! The control steps of the chain as library types, and the in-process runtime.
+//!
+//! One implementation of each step, two runtimes (copper-rs style): the process binaries of
+//! `pcr-nodes` wrap one step each with iceoryx2; [`InProcessChain`] wraps all of them on a
+//! simulated clock for fast deterministic experiments and tests. Each `step` takes the cycle's
+//! input and returns its output, is short and does not allocate.
+//!
+//! * [`InterpolatorStep`] around a [`SetpointSource`] (interim: [`InterimPathSource`]; the
+//!   planner's interpolator implements the same trait),
+//! * [`IkStep`] (pcr-kinematics),
+//! * [`DriverStep`] around any [`pcr_driver::Driver`] and a [`PoseSensor`] (interim plant:
+//!   [`IdealDrive`] + [`FkPoseSensor`]; the simulated plant implements the same two traits),
+//! * [`CorrectionStep`] (placeholder pass-through until the mocap bridge exists),
+//! * [`Recorder`] (the recording format) and [`Accuracy`] (planned vs measured).
+
+pub mod accuracy;
+pub mod correction;
+pub mod drive;
+pub mod driver_step;
+pub mod ik;
+pub mod interpolator;
+pub mod recorder;
+pub mod runtime;
+pub mod setpoint;
+
+pub use accuracy::Accuracy;
+pub use correction::{measured_of, CorrectionStep};
+pub use drive::{
+    max_step_rate, safety_stack, FkPoseSensor, IdealDrive, NoPoseSensor, PoseSensor, SafeDriver,
+};
+pub use driver_step::{DriverStep, STALE_CYCLES};
+pub use ik::IkStep;
+pub use interpolator::{
+    command_of_moves, moves_of, simple_command, CommandError, InterpolatorStep,
+};
+pub use recorder::Recorder;
+pub use runtime::{CycleOutput, InProcessChain, InterimChain, RunError};
+pub use setpoint::{
+    paper_circle, paper_program, paper_square, InterimPathSource, Move, PlanError, SetpointSource,
+};

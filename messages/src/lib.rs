@@ -1,1 +1,478 @@
-//! Message types and service names of the process chain (work in progress).
+//! Message types and service names of the process chain (one place for both).
+//!
+//! Every message is `#[repr(C)]`, self-contained (no pointers) and derives iceoryx2's
+//! [`ZeroCopySend`] with an explicit, versioned `type_name`, so that the same struct travels
+//! through shared memory between the process binaries and is passed by value inside the
+//! in-process runtime.
+//!
+//! Units: millimetres, radians inside messages (degrees only in files and logs), seconds for
+//! the chain's clock (`t_s`), nanoseconds of `CLOCK_MONOTONIC` for latency stamps (`*_ns`),
+//! motor steps as signed integers, curvatures in 1/mm.
+//!
+//! Versioning: [`PROTOCOL_VERSION`] is part of every service name ([`service_name`]) and of every
+//! message, and a process announces it on the unversioned [`PROTOCOL_SERVICE`] with
+//! [`ProtocolHello`] (a type that must never change). A process that hears a different version
+//! there exits with [`version_mismatch_message`]; the supervisor also refuses heartbeats that
+//! carry a different version.
+
+use iceoryx2::prelude::ZeroCopySend;
+
+/// Version of the chain's protocol (message layouts and service names). Bump on any change.
+pub const PROTOCOL_VERSION: u32 = 1;
+
+/// The unversioned service on which every process announces its protocol version.
+pub const PROTOCOL_SERVICE: &str = "pcr/protocol";
+
+/// Base names of the versioned services (see [`service_name`]).
+pub mod services {
+    /// Interpolator -> IK: [`crate::TaskSetpoint`] (publish-subscribe + event of the same name).
+    pub const TASK_SETPOINT: &str = "task_setpoint";
+    /// IK -> driver: [`crate::JointSetpoint`].
+    pub const JOINT_SETPOINT: &str = "joint_setpoint";
+    /// Driver -> recorder, correction: [`crate::DriverStateMsg`].
+    pub const DRIVER_STATE: &str = "driver_state";
+    /// Pose sensor / mocap -> correction, recorder: [`crate::MeasuredPose`].
+    pub const MEASURED_POSE: &str = "measured_pose";
+    /// Correction -> interpolator: [`crate::Correction`].
+    pub const CORRECTION: &str = "correction";
+    /// Every process -> supervisor: [`crate::Heartbeat`].
+    pub const HEARTBEAT: &str = "heartbeat";
+    /// Supervisor -> interpolator: [`crate::Command`].
+    pub const COMMAND: &str = "command";
+    /// Interpolator -> supervisor: [`crate::PlannerStatus`].
+    pub const STATUS: &str = "status";
+}
+
+/// The full, versioned iceoryx2 service name of a base name: `pcr/v{PROTOCOL_VERSION}/{base}`.
+pub fn service_name(base: &str) -> String {
+    service_name_for(PROTOCOL_VERSION, base)
+}
+
+/// The service name of `base` under protocol `version`.
+pub fn service_name_for(version: u32, base: &str) -> String {
+    format!("pcr/v{version}/{base}")
+}
+
+/// The error text a process prints (and exits with) when it meets another protocol version.
+pub fn version_mismatch_message(mine: u32, theirs: u32, who: &str) -> String {
+    format!(
+        "protocol version mismatch: this binary speaks pcr protocol v{mine}, but {who} speaks \
+         v{theirs}; refusing to connect (rebuild all chain binaries from one revision)"
+    )
+}
+
+/// Monotonic clock (CLOCK_MONOTONIC) in nanoseconds: the time base of the latency stamps, the
+/// same in every process of the machine.
+pub fn monotonic_ns() -> u64 {
+    let mut ts = libc_timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: clock_gettime writes into the struct we pass; CLOCK_MONOTONIC always exists.
+    unsafe { clock_gettime(CLOCK_MONOTONIC, &mut ts) };
+    ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
+}
+
+#[repr(C)]
+struct libc_timespec {
+    tv_sec: i64,
+    tv_nsec: i64,
+}
+const CLOCK_MONOTONIC: i32 = 1;
+extern "C" {
+    fn clock_gettime(clk: i32, ts: *mut libc_timespec) -> i32;
+}
+
+/// Which process sent a heartbeat or hello.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NodeKind {
+    /// The 20 ms interpolator (`pcr-planner`).
+    Planner = 1,
+    /// The IK step (`pcr-ik`).
+    Ik = 2,
+    /// The driver (`pcr-driver`).
+    Driver = 3,
+    /// The mocap / correction step (`pcr-mocap`).
+    Mocap = 4,
+    /// The supervisor.
+    Supervisor = 5,
+    /// A test or benchmark client.
+    Tool = 6,
+}
+
+impl NodeKind {
+    /// From the wire value.
+    pub fn from_u32(v: u32) -> Option<NodeKind> {
+        Some(match v {
+            1 => NodeKind::Planner,
+            2 => NodeKind::Ik,
+            3 => NodeKind::Driver,
+            4 => NodeKind::Mocap,
+            5 => NodeKind::Supervisor,
+            6 => NodeKind::Tool,
+            _ => return None,
+        })
+    }
+    /// Short name (`planner`, `ik`, `driver`, `mocap`, `supervisor`, `tool`).
+    pub fn name(self) -> &'static str {
+        match self {
+            NodeKind::Planner => "planner",
+            NodeKind::Ik => "ik",
+            NodeKind::Driver => "driver",
+            NodeKind::Mocap => "mocap",
+            NodeKind::Supervisor => "supervisor",
+            NodeKind::Tool => "tool",
+        }
+    }
+}
+
+/// Protocol announcement on [`PROTOCOL_SERVICE`]. Its layout must never change.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend)]
+#[type_name("pcr::ProtocolHello")]
+pub struct ProtocolHello {
+    /// The sender's [`PROTOCOL_VERSION`].
+    pub version: u32,
+    /// The sender's [`NodeKind`] as u32.
+    pub kind: u32,
+    /// The sender's process id.
+    pub pid: u32,
+    /// Reserved, 0.
+    pub reserved: u32,
+}
+
+/// Latency stamps carried along the chain (CLOCK_MONOTONIC ns; 0 = not stamped).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend)]
+#[type_name("pcr::v1::Stamps")]
+pub struct Stamps {
+    /// The interpolator published the task setpoint.
+    pub interp_pub_ns: u64,
+    /// The IK process received it.
+    pub ik_rx_ns: u64,
+    /// The IK process published the joint setpoint.
+    pub ik_pub_ns: u64,
+    /// The driver process received the joint setpoint.
+    pub drv_rx_ns: u64,
+    /// The driver wrote the command to the drive.
+    pub drv_cmd_ns: u64,
+}
+
+/// Bits of [`TaskSetpoint::flags`].
+pub mod task_flags {
+    /// A program is running (the setpoint moves or is part of a motion).
+    pub const ACTIVE: u32 = 1;
+    /// The program is paused (the setpoint holds).
+    pub const PAUSED: u32 = 2;
+    /// This is the last setpoint of the program.
+    pub const DONE: u32 = 4;
+}
+
+/// Interpolator output: the task-space setpoint of one cycle.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("pcr::v1::TaskSetpoint")]
+pub struct TaskSetpoint {
+    /// Chain time of the setpoint, s.
+    pub t_s: f64,
+    /// Platform x, mm.
+    pub x_mm: f64,
+    /// Platform y, mm.
+    pub y_mm: f64,
+    /// Platform orientation, rad.
+    pub phi_rad: f64,
+    /// Cycle counter of the interpolator (strictly increasing).
+    pub seq: u64,
+    /// Program run id (0 = none).
+    pub run_id: u32,
+    /// [`task_flags`].
+    pub flags: u32,
+    /// Latency stamps.
+    pub stamps: Stamps,
+    /// [`PROTOCOL_VERSION`] of the sender.
+    pub version: u32,
+    /// Reserved, 0.
+    pub reserved: u32,
+}
+
+/// IK output: the joint-space setpoint of one cycle.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("pcr::v1::JointSetpoint")]
+pub struct JointSetpoint {
+    /// Chain time (of the task setpoint), s.
+    pub t_s: f64,
+    /// Motor positions to reach, steps.
+    pub steps: [i32; 3],
+    /// 1 = coils enabled.
+    pub enable: u32,
+    /// Curvatures, 1/mm.
+    pub kappa: [f64; 3],
+    /// The task setpoint this came from (planned pose for the recorder): x mm, y mm, phi rad.
+    pub planned: [f64; 3],
+    /// Seq of the task setpoint.
+    pub seq: u64,
+    /// Program run id.
+    pub run_id: u32,
+    /// [`task_flags`] of the task setpoint.
+    pub flags: u32,
+    /// 1 when IK failed and this repeats the last valid setpoint.
+    pub ik_failed: u32,
+    /// [`PROTOCOL_VERSION`] of the sender.
+    pub version: u32,
+    /// Latency stamps.
+    pub stamps: Stamps,
+}
+
+/// Bits of [`DriverStateMsg::flags`].
+pub mod driver_flags {
+    /// Coils energised.
+    pub const ENABLED: u32 = 1;
+    /// Still moving to the setpoint.
+    pub const MOVING: u32 = 2;
+    /// The setpoint was limited (rate or range).
+    pub const LIMITED: u32 = 4;
+    /// The drive is in fault and holds.
+    pub const FAULT: u32 = 8;
+    /// Setpoints are stale (none for two cycles): holding position, motors stopped.
+    pub const STALE_HOLD: u32 = 16;
+    /// The measured pose fields are valid.
+    pub const POSE_VALID: u32 = 32;
+}
+
+/// Driver output: what was commanded and reached this cycle, plus the measured pose when the
+/// backend has a pose sensor.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("pcr::v1::DriverState")]
+pub struct DriverStateMsg {
+    /// Chain time of the cycle, s.
+    pub t_s: f64,
+    /// Motor positions commanded to the drive, steps.
+    pub commanded: [i32; 3],
+    /// [`driver_flags`].
+    pub flags: u32,
+    /// Motor positions reached, steps.
+    pub steps: [i32; 3],
+    /// Program run id of the setpoint.
+    pub run_id: u32,
+    /// Measured platform pose: x mm, y mm, phi rad (valid if [`driver_flags::POSE_VALID`]).
+    pub measured: [f64; 3],
+    /// Planned pose of the setpoint executed: x mm, y mm, phi rad.
+    pub planned: [f64; 3],
+    /// Seq of the setpoint executed.
+    pub seq: u64,
+    /// Driver cycle counter.
+    pub cycle: u64,
+    /// [`task_flags`] of the setpoint executed.
+    pub task_flags: u32,
+    /// [`PROTOCOL_VERSION`] of the sender.
+    pub version: u32,
+    /// Latency stamps.
+    pub stamps: Stamps,
+}
+
+/// A measured platform pose (pose sensor or motion capture).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("pcr::v1::MeasuredPose")]
+pub struct MeasuredPose {
+    /// Chain time of the measurement, s.
+    pub t_s: f64,
+    /// x mm, y mm, phi rad.
+    pub pose: [f64; 3],
+    /// Seq of the driver cycle it belongs to.
+    pub seq: u64,
+    /// 1 = valid.
+    pub valid: u32,
+    /// [`PROTOCOL_VERSION`].
+    pub version: u32,
+}
+
+/// Task-space correction added to the interpolator's setpoint (outer loop).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("pcr::v1::Correction")]
+pub struct Correction {
+    /// Chain time, s.
+    pub t_s: f64,
+    /// Offset x mm, y mm, phi rad.
+    pub offset: [f64; 3],
+    /// Last tracking error (measured - planned): x mm, y mm, phi rad.
+    pub error: [f64; 3],
+    /// Seq of the measurement.
+    pub seq: u64,
+    /// [`PROTOCOL_VERSION`].
+    pub version: u32,
+    /// Reserved.
+    pub reserved: u32,
+}
+
+/// Cycle statistics and liveness of one process, published every heartbeat period.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend)]
+#[type_name("pcr::v1::Heartbeat")]
+pub struct Heartbeat {
+    /// [`PROTOCOL_VERSION`] of the sender.
+    pub version: u32,
+    /// [`NodeKind`] as u32.
+    pub kind: u32,
+    /// Process id.
+    pub pid: u32,
+    /// 1 = the process is in a safe hold (stale input, fault).
+    pub holding: u32,
+    /// Heartbeat counter.
+    pub seq: u64,
+    /// Cycles run.
+    pub cycles: u64,
+    /// Cycles whose work exceeded the period (or, for periodic steps, woke later than a period).
+    pub deadline_misses: u64,
+    /// Cycles with stale or missing input.
+    pub stale_inputs: u64,
+    /// Cycle (work) time percentiles, ns: p50, p99, max.
+    pub cycle_ns: [u64; 3],
+    /// Wake-up jitter percentiles (|actual - expected wake|), ns: p50, p99, max.
+    pub jitter_ns: [u64; 3],
+}
+
+/// Kinds of [`Command`].
+pub mod command_kind {
+    /// Run the program in [`crate::Command::moves`] / [`crate::Command::program`].
+    pub const RUN: u32 = 1;
+    /// Pause (hold the setpoint, keep the program).
+    pub const PAUSE: u32 = 2;
+    /// Resume after a pause.
+    pub const RESUME: u32 = 3;
+    /// Stop (hold where the setpoint is, drop the program).
+    pub const STOP: u32 = 4;
+}
+
+/// Built-in programs of [`Command::program`].
+pub mod program_id {
+    /// The moves listed in the command.
+    pub const MOVES: u32 = 0;
+    /// The paper's circle (r = 50 mm at 50 mm/s) then square (50 mm side, rest-to-rest).
+    pub const PAPER: u32 = 1;
+    /// The paper's circle only.
+    pub const CIRCLE: u32 = 2;
+    /// The paper's square only.
+    pub const SQUARE: u32 = 3;
+}
+
+/// Maximum number of moves in one [`Command`].
+pub const MAX_MOVES: usize = 16;
+
+/// Kinds of [`MoveMsg`].
+pub mod move_kind {
+    /// Straight line to `a` (x, y mm, phi rad), rest to rest, mean speed `b[0]` mm/s.
+    pub const LINE: u32 = 1;
+    /// Full circle of centre (a[0], a[1]) mm, radius b[0] mm at b[1] mm/s, phi a[2].
+    pub const CIRCLE: u32 = 2;
+    /// Dwell b[0] s.
+    pub const DWELL: u32 = 3;
+}
+
+/// One move of a program on the wire.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("pcr::v1::Move")]
+pub struct MoveMsg {
+    /// [`move_kind`].
+    pub kind: u32,
+    /// Reserved.
+    pub reserved: u32,
+    /// First argument triple (see [`move_kind`]).
+    pub a: [f64; 3],
+    /// Second argument pair.
+    pub b: [f64; 2],
+}
+
+/// Supervisor -> interpolator command.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("pcr::v1::Command")]
+pub struct Command {
+    /// [`command_kind`].
+    pub kind: u32,
+    /// [`program_id`] for RUN.
+    pub program: u32,
+    /// Run id assigned by the supervisor (echoed in setpoints and status).
+    pub run_id: u32,
+    /// Number of valid entries in `moves`.
+    pub n_moves: u32,
+    /// The moves for [`program_id::MOVES`].
+    pub moves: [MoveMsg; MAX_MOVES],
+    /// [`PROTOCOL_VERSION`].
+    pub version: u32,
+    /// Reserved.
+    pub reserved: u32,
+}
+
+/// States of [`PlannerStatus::state`].
+pub mod planner_state {
+    /// No program.
+    pub const IDLE: u32 = 0;
+    /// Running a program.
+    pub const RUNNING: u32 = 1;
+    /// Paused.
+    pub const PAUSED: u32 = 2;
+    /// The program finished.
+    pub const DONE: u32 = 3;
+    /// Stopped by command.
+    pub const STOPPED: u32 = 4;
+    /// The command was refused (bad program).
+    pub const REFUSED: u32 = 5;
+}
+
+/// Interpolator -> supervisor status (every cycle's state change and every heartbeat).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("pcr::v1::PlannerStatus")]
+pub struct PlannerStatus {
+    /// Chain time, s.
+    pub t_s: f64,
+    /// Program time elapsed, s.
+    pub progress_s: f64,
+    /// Program duration, s.
+    pub duration_s: f64,
+    /// Run id.
+    pub run_id: u32,
+    /// [`planner_state`].
+    pub state: u32,
+    /// [`PROTOCOL_VERSION`].
+    pub version: u32,
+    /// Reserved.
+    pub reserved: u32,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn service_names_carry_the_version() {
+        assert_eq!(service_name(services::HEARTBEAT), "pcr/v1/heartbeat");
+        assert_ne!(
+            service_name_for(2, services::TASK_SETPOINT),
+            service_name(services::TASK_SETPOINT)
+        );
+    }
+
+    #[test]
+    fn monotonic_clock_advances() {
+        let a = monotonic_ns();
+        let b = monotonic_ns();
+        assert!(b >= a && a > 0);
+    }
+
+    #[test]
+    fn hello_layout_is_frozen() {
+        assert_eq!(std::mem::size_of::<ProtocolHello>(), 16);
+    }
+
+    #[test]
+    fn mismatch_message_names_both_versions() {
+        let m = version_mismatch_message(1, 2, "pcr-driver");
+        assert!(m.contains("v1") && m.contains("v2") && m.contains("mismatch"));
+    }
+}

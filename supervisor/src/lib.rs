@@ -1,1 +1,9 @@
-//! Supervisor of the process chain (not started yet; see the issues).
+//! Supervisor of the process chain: starts the processes named in a configuration, watches them
+//! (exit, heartbeat timeout), restarts them with backoff, escalates to a safe stop after repeated
+//! failures, runs programs, records runs and reports path accuracy and deadline misses.
+
+pub mod config;
+pub mod ctl;
+pub mod supervisor;
+
+pub use config::{ConfigError, SupervisorConfig};

@@ -1,0 +1,457 @@
+//! `pcr-bench-latency`: latency of the process chain, iceoryx2 vs a Unix-domain-socket baseline,
+//! measured in the same run on the same machine.
+//!
+//! iceoryx2: starts `pcr-driver` (sim), `pcr-ik` and `pcr-planner` with a private prefix, runs the
+//! paper program (re-sent when it ends) and reads the latency stamps carried by every driver
+//! state: planner publish -> IK receive -> IK publish -> driver receive -> driver command.
+//! UDS baseline: the same three roles and the same step code (interim source, IK, ideal drive)
+//! as three processes (this binary re-executed with `--uds-role`), connected by Unix datagram
+//! sockets, the messages copied through the kernel.
+//!
+//! The period defaults to 2 ms (10x faster than the 20 ms control period) so that 10,000 cycles
+//! take 20 s per transport. A deadline miss is a cycle whose end-to-end latency exceeds the
+//! period, or a cycle lost (a gap in the sequence numbers seen at the driver's output).
+
+use anyhow::{anyhow, bail, Context, Result};
+use clap::Parser;
+use hdrhistogram::Histogram;
+use iceoryx2::prelude::*;
+use pcr_control::{
+    max_step_rate, safety_stack, simple_command, DriverStep, FkPoseSensor, IdealDrive, IkStep,
+    InterimPathSource, InterpolatorStep,
+};
+use pcr_kinematics::{Pose, Robot};
+use pcr_messages::{
+    command_kind, monotonic_ns, program_id, services as s, Command, DriverStateMsg, Heartbeat,
+    JointSetpoint, TaskSetpoint, PROTOCOL_VERSION,
+};
+use pcr_nodes::ChainNode;
+use pcr_robot::RobotConfig;
+use std::os::unix::net::UnixDatagram;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Stdio};
+use std::time::{Duration, Instant};
+
+#[derive(Parser, Debug)]
+#[command(about = "Per-hop and end-to-end latency of the chain: iceoryx2 vs Unix sockets")]
+struct Args {
+    /// Cycles to measure per transport.
+    #[arg(long, default_value_t = 10_000)]
+    cycles: u64,
+    /// Cycle period, ms (faster than the 20 ms control period to gather cycles quickly).
+    #[arg(long, default_value_t = 2.0)]
+    period_ms: f64,
+    /// Robot configuration.
+    #[arg(long, default_value = "configs/robot.toml")]
+    robot: String,
+    /// SCHED_FIFO priority for every process of both transports (0 = normal scheduling).
+    #[arg(long, default_value_t = 0)]
+    rt_priority: i32,
+    /// Skip the UDS baseline.
+    #[arg(long)]
+    no_uds: bool,
+    /// Internal: run as a UDS relay role (ik, driver) in directory --dir.
+    #[arg(long, hide = true)]
+    uds_role: Option<String>,
+    #[arg(long, hide = true)]
+    dir: Option<PathBuf>,
+}
+
+const HOPS: [&str; 5] = [
+    "planner -> ik (transport)",
+    "ik step",
+    "ik -> driver (transport)",
+    "driver step to command",
+    "end to end (planner publish -> driver command)",
+];
+
+struct Hists {
+    h: Vec<Histogram<u64>>,
+    cycles: u64,
+    late: u64,
+    lost: u64,
+    last_seq: Option<u64>,
+}
+
+impl Hists {
+    fn new() -> Self {
+        Self {
+            h: (0..HOPS.len())
+                .map(|_| Histogram::new_with_bounds(1, 10_000_000_000, 3).unwrap())
+                .collect(),
+            cycles: 0,
+            late: 0,
+            lost: 0,
+            last_seq: None,
+        }
+    }
+    fn add(&mut self, st: &pcr_messages::Stamps, seq: u64, period_ns: u64) {
+        let v = [
+            st.ik_rx_ns.saturating_sub(st.interp_pub_ns),
+            st.ik_pub_ns.saturating_sub(st.ik_rx_ns),
+            st.drv_rx_ns.saturating_sub(st.ik_pub_ns),
+            st.drv_cmd_ns.saturating_sub(st.drv_rx_ns),
+            st.drv_cmd_ns.saturating_sub(st.interp_pub_ns),
+        ];
+        for (h, x) in self.h.iter_mut().zip(v) {
+            h.saturating_record(x.max(1));
+        }
+        if v[4] > period_ns {
+            self.late += 1;
+        }
+        if let Some(l) = self.last_seq {
+            if seq > l + 1 {
+                self.lost += seq - l - 1;
+            }
+        }
+        self.last_seq = Some(seq);
+        self.cycles += 1;
+    }
+    fn print(&self, title: &str, extra: &str) {
+        println!("\n## {title}\n");
+        println!(
+            "cycles {}, late (end to end > period) {}, lost {}{extra}\n",
+            self.cycles, self.late, self.lost
+        );
+        println!("| hop | p50 us | p99 us | p99.9 us | max us |");
+        println!("|---|---:|---:|---:|---:|");
+        for (name, h) in HOPS.iter().zip(&self.h) {
+            let q = |p: f64| h.value_at_quantile(p) as f64 / 1e3;
+            println!(
+                "| {name} | {:.1} | {:.1} | {:.1} | {:.1} |",
+                q(0.5),
+                q(0.99),
+                q(0.999),
+                h.max() as f64 / 1e3
+            );
+        }
+    }
+}
+
+fn main() -> std::process::ExitCode {
+    pcr_nodes::init_logging();
+    let a = Args::parse();
+    let r = match a.uds_role.as_deref() {
+        Some(role) => uds_role(role, a.dir.as_deref().unwrap_or(Path::new(".")), &a),
+        None => bench(&a),
+    };
+    match r {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("pcr-bench-latency: error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+struct Kids(Vec<Child>);
+impl Drop for Kids {
+    fn drop(&mut self) {
+        for c in &mut self.0 {
+            // SAFETY: kill(2) on our own child.
+            unsafe { libc::kill(c.id() as i32, libc::SIGTERM) };
+        }
+        for c in &mut self.0 {
+            let _ = c.wait();
+        }
+    }
+}
+
+fn bin_dir() -> PathBuf {
+    std::env::current_exe()
+        .ok()
+        .and_then(|p| p.parent().map(PathBuf::from))
+        .unwrap_or_default()
+}
+
+fn robot(path: &str) -> Result<Robot> {
+    let cfg = RobotConfig::load(path).with_context(|| format!("robot {path}"))?;
+    Robot::new(&cfg).map_err(|e| anyhow!("robot model: {e}"))
+}
+
+fn bench(a: &Args) -> Result<()> {
+    let period_ns = (a.period_ms * 1e6) as u64;
+    println!(
+        "# pcr-bench-latency: {} cycles per transport at a {} ms period, SCHED_FIFO priority {} \
+         (0 = normal scheduling), {} CPUs",
+        a.cycles,
+        a.period_ms,
+        a.rt_priority,
+        std::thread::available_parallelism().map_or(0, |n| n.get())
+    );
+    let ice = bench_iceoryx2(a, period_ns)?;
+    ice.0.print(
+        "iceoryx2 (zero-copy shared memory, event-driven)",
+        &format!(", process deadline misses (heartbeats) {}", ice.1),
+    );
+    if !a.no_uds {
+        let u = bench_uds(a, period_ns)?;
+        u.0.print(
+            "Unix-domain datagram sockets (baseline, same steps)",
+            &format!(", planner wake-ups late by > period/2: {}", u.1),
+        );
+    }
+    Ok(())
+}
+
+fn bench_iceoryx2(a: &Args, period_ns: u64) -> Result<(Hists, u64)> {
+    let prefix = format!("pcrbench{}_", std::process::id());
+    let r = bench_iceoryx2_in(a, period_ns, &prefix);
+    // Every node of the prefix is gone now: remove what iceoryx2 leaves behind.
+    pcr_nodes::ports::remove_leftovers(&prefix);
+    r
+}
+
+fn bench_iceoryx2_in(a: &Args, period_ns: u64, prefix: &str) -> Result<(Hists, u64)> {
+    let prefix = prefix.to_string();
+    let common = [
+        "--prefix".to_string(),
+        prefix.clone(),
+        "--period-ms".into(),
+        a.period_ms.to_string(),
+        "--robot".into(),
+        a.robot.clone(),
+        "--rt-priority".into(),
+        a.rt_priority.to_string(),
+    ];
+    let mut kids = Kids(Vec::new());
+    for b in ["pcr-driver", "pcr-ik", "pcr-planner"] {
+        kids.0.push(
+            std::process::Command::new(bin_dir().join(b))
+                .args(&common)
+                .env("RUST_LOG", "warn")
+                .stdin(Stdio::null())
+                .spawn()
+                .with_context(|| format!("start {b}"))?,
+        );
+    }
+    let cn = ChainNode::new("pcr-bench", &prefix, PROTOCOL_VERSION)?;
+    let sub = cn.subscriber::<DriverStateMsg>(s::DRIVER_STATE)?;
+    let listener = cn.listener(s::DRIVER_STATE)?;
+    let sub_hb = cn.subscriber::<Heartbeat>(s::HEARTBEAT)?;
+    let pub_cmd = cn.publisher::<Command>(s::COMMAND)?;
+    let mut h = Hists::new();
+    let mut misses = std::collections::HashMap::new();
+    let ws = WaitSetBuilder::new()
+        .create::<ipc::Service>()
+        .map_err(|e| anyhow!("{e:?}"))?;
+    let ev = ws
+        .attach_notification(&listener)
+        .map_err(|e| anyhow!("{e:?}"))?;
+    let tick = ws
+        .attach_interval(Duration::from_millis(500))
+        .map_err(|e| anyhow!("{e:?}"))?;
+    let start = Instant::now();
+    let mut run_id = 0u32;
+    let mut warm = 0u64;
+    let r = pcr_nodes::run_waitset(&ws, |id| {
+        if id.has_event_from(&ev) {
+            let _ = listener.try_wait(|_| {});
+            while let Ok(Some(smp)) = sub.receive() {
+                let m = smp.payload();
+                if m.stamps.drv_cmd_ns != 0 && m.stamps.interp_pub_ns != 0 {
+                    // Skip the first cycles (start-up, page faults).
+                    warm += 1;
+                    if warm > 100 {
+                        h.add(&m.stamps, m.seq, period_ns);
+                    }
+                }
+            }
+            if h.cycles >= a.cycles {
+                return CallbackProgression::Stop;
+            }
+        }
+        if id.has_event_from(&tick) {
+            while let Ok(Some(smp)) = sub_hb.receive() {
+                misses.insert(smp.pid, smp.deadline_misses);
+            }
+            // (Re)start the paper program so that the IK works on a moving target.
+            run_id += 1;
+            if run_id % 40 == 1 {
+                let _ =
+                    pub_cmd.send_copy(simple_command(command_kind::RUN, program_id::PAPER, run_id));
+            }
+            if start.elapsed()
+                > Duration::from_secs(30) + Duration::from_nanos(period_ns * a.cycles * 3)
+            {
+                return CallbackProgression::Stop;
+            }
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(|e| anyhow!("{e:?}"))?;
+    if !matches!(r, WaitSetRunResult::StopRequest) {
+        bail!("interrupted");
+    }
+    while let Ok(Some(smp)) = sub_hb.receive() {
+        misses.insert(smp.pid, smp.deadline_misses);
+    }
+    drop(kids);
+    Ok((h, misses.values().sum()))
+}
+
+use iceoryx2::waitset::WaitSetRunResult;
+
+fn as_bytes<T: Copy>(v: &T) -> &[u8] {
+    // SAFETY: T is a repr(C) plain-data message; reading its bytes is fine.
+    unsafe { std::slice::from_raw_parts(v as *const T as *const u8, std::mem::size_of::<T>()) }
+}
+
+fn from_bytes<T: Copy + Default>(b: &[u8]) -> T {
+    if b.len() != std::mem::size_of::<T>() {
+        return T::default();
+    }
+    // SAFETY: the size matches and the messages are plain data of one build.
+    unsafe { std::ptr::read_unaligned(b.as_ptr() as *const T) }
+}
+
+fn uds_role(role: &str, dir: &Path, a: &Args) -> Result<()> {
+    let robot = robot(&a.robot)?;
+    pcr_nodes::realtime::apply(a.rt_priority, None, false);
+    let mut buf = [0u8; 4096];
+    match role {
+        "ik" => {
+            let sock = UnixDatagram::bind(dir.join("ik.sock"))?;
+            let mut ik = IkStep::new(robot);
+            loop {
+                let n = sock.recv(&mut buf)?;
+                let rx = monotonic_ns();
+                let mut sp: TaskSetpoint = from_bytes(&buf[..n]);
+                if sp.seq == u64::MAX {
+                    let _ = sock.send_to(&buf[..n], dir.join("drv.sock"));
+                    return Ok(());
+                }
+                sp.stamps.ik_rx_ns = rx;
+                let mut j = ik.step(&sp);
+                j.stamps.ik_pub_ns = monotonic_ns();
+                let _ = sock.send_to(as_bytes(&j), dir.join("drv.sock"));
+            }
+        }
+        "driver" => {
+            let sock = UnixDatagram::bind(dir.join("drv.sock"))?;
+            let home: [i32; 3] = std::array::from_fn(|i| {
+                robot
+                    .kappa_to_steps(i, robot.home_kappa[i])
+                    .map_or(0, |s| s.round() as i32)
+            });
+            let period = a.period_ms * 1e-3;
+            let drv = safety_stack(IdealDrive::new(home, max_step_rate(&robot)), &robot, 1.0);
+            let mut step = DriverStep::new(drv, FkPoseSensor::new(robot), period);
+            loop {
+                let n = sock.recv(&mut buf)?;
+                let rx = monotonic_ns();
+                if n != std::mem::size_of::<JointSetpoint>() {
+                    let _ = sock.send_to(&buf[..n], dir.join("col.sock"));
+                    return Ok(());
+                }
+                let mut j: JointSetpoint = from_bytes(&buf[..n]);
+                j.stamps.drv_rx_ns = rx;
+                let st = step
+                    .step(pcr_nodes::chain_time_s(), Some(&j))
+                    .map_err(|e| anyhow!("{e}"))?;
+                let _ = sock.send_to(as_bytes(&st), dir.join("col.sock"));
+            }
+        }
+        o => bail!("unknown role {o}"),
+    }
+}
+
+fn bench_uds(a: &Args, period_ns: u64) -> Result<(Hists, u64)> {
+    let dir = std::env::temp_dir().join(format!("pcrbench-uds-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir)?;
+    let col = UnixDatagram::bind(dir.join("col.sock"))?;
+    col.set_nonblocking(true)?;
+    let me = std::env::current_exe()?;
+    let mut kids = Kids(Vec::new());
+    for role in ["driver", "ik"] {
+        kids.0.push(
+            std::process::Command::new(&me)
+                .args(["--uds-role", role, "--robot", &a.robot])
+                .arg("--rt-priority")
+                .arg(a.rt_priority.to_string())
+                .arg("--period-ms")
+                .arg(a.period_ms.to_string())
+                .arg("--dir")
+                .arg(&dir)
+                .stdin(Stdio::null())
+                .spawn()?,
+        );
+    }
+    let end = Instant::now() + Duration::from_secs(10);
+    while !(dir.join("ik.sock").exists() && dir.join("drv.sock").exists()) {
+        if Instant::now() > end {
+            bail!("UDS roles did not start");
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let tx = UnixDatagram::unbound()?;
+    let rt = pcr_nodes::realtime::apply(a.rt_priority, None, false);
+    let mut interp = InterpolatorStep::new(InterimPathSource::new(), Pose::default());
+    let mut h = Hists::new();
+    let mut late_wakes = 0u64;
+    let period = Duration::from_nanos(period_ns);
+    let mut next = Instant::now() + period;
+    let mut buf = [0u8; 4096];
+    let mut sent = 0u64;
+    let total = a.cycles + 100;
+    let mut t_cmd = 0u64;
+    let mut next_cmd = 0u64;
+    while sent < total {
+        if sent == next_cmd {
+            next_cmd += 10_000;
+            t_cmd += 1;
+            interp
+                .command(&simple_command(
+                    command_kind::RUN,
+                    program_id::PAPER,
+                    t_cmd as u32,
+                ))
+                .map_err(|e| anyhow!("{e}"))?;
+        }
+        let now = Instant::now();
+        if next > now {
+            std::thread::sleep(next - now);
+        }
+        let woke = Instant::now();
+        if woke.duration_since(next) > period / 2 {
+            late_wakes += 1;
+        }
+        next += period;
+        let mut sp = interp.step(pcr_nodes::chain_time_s());
+        sp.stamps.interp_pub_ns = monotonic_ns();
+        let _ = tx.send_to(as_bytes(&sp), dir.join("ik.sock"));
+        sent += 1;
+        // Collect whatever came back (non-blocking; the stamps carry the latencies).
+        while let Ok(n) = col.recv(&mut buf) {
+            let st: DriverStateMsg = from_bytes(&buf[..n]);
+            if st.seq > 100 {
+                h.add(&st.stamps, st.seq, period_ns);
+            }
+        }
+    }
+    // Stop the roles: a sentinel travels through the chain.
+    let stop = TaskSetpoint {
+        seq: u64::MAX,
+        ..Default::default()
+    };
+    let _ = tx.send_to(as_bytes(&stop), dir.join("ik.sock"));
+    let end = Instant::now() + Duration::from_secs(2);
+    'tail: while Instant::now() < end {
+        while let Ok(n) = col.recv(&mut buf) {
+            if n != std::mem::size_of::<DriverStateMsg>() {
+                break 'tail;
+            }
+            let st: DriverStateMsg = from_bytes(&buf[..n]);
+            h.add(&st.stamps, st.seq, period_ns);
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    drop(kids);
+    if rt.priority > 0 {
+        // Back to normal scheduling for the rest of the run.
+        pcr_nodes::realtime::apply_normal();
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    Ok((h, late_wakes))
+}

@@ -1,0 +1,199 @@
+//! `pcr-driver`: the driver process. Wakes on the joint-setpoint event and writes the setpoint
+//! to the drive at once; a periodic interval (the control period) notices missing setpoints: after
+//! two cycles without one it holds position (stops the motors). Publishes the driver state (+
+//! event) with the measured pose when the backend has one.
+//!
+//! Backends: `sim` (interim ideal drive + FK pose sensor, later the simulated plant) and `serial`
+//! (the Arduino firmware), both inside the safety stack Watchdog(PositionLimit(RateLimit(..))).
+
+use anyhow::{anyhow, Context, Result};
+use clap::{Parser, ValueEnum};
+use iceoryx2::prelude::*;
+use pcr_control::{
+    max_step_rate, safety_stack, DriverStep, FkPoseSensor, IdealDrive, NoPoseSensor, PoseSensor,
+    SafeDriver,
+};
+use pcr_driver::{Driver, SerialConfig, SerialDriver};
+use pcr_kinematics::Robot;
+use pcr_messages::{
+    monotonic_ns, services as s, DriverStateMsg, Heartbeat, JointSetpoint, NodeKind,
+};
+use pcr_nodes::{chain_time_s, ports::latest, ChainNode, CommonArgs, CycleStats, ProtocolGuard};
+use pcr_robot::RobotConfig;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum Backend {
+    /// Interim ideal drive with FK pose sensor (simulation).
+    Sim,
+    /// The stepper firmware over a serial port.
+    Serial,
+}
+
+#[derive(Parser, Debug)]
+#[command(about = "pcr-driver: joint setpoints to the drive")]
+struct Args {
+    #[command(flatten)]
+    common: CommonArgs,
+    /// Drive backend.
+    #[arg(long, value_enum, default_value = "sim")]
+    backend: Backend,
+    /// Serial port of the `serial` backend.
+    #[arg(long, default_value = "/dev/ttyACM0")]
+    port: String,
+}
+
+fn main() -> std::process::ExitCode {
+    pcr_nodes::init_logging();
+    match run(Args::parse()) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("pcr-driver: error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(a: Args) -> Result<()> {
+    let c = &a.common;
+    let robot_cfg = RobotConfig::load(&c.robot).with_context(|| format!("robot {}", c.robot))?;
+    let robot = Robot::new(&robot_cfg).map_err(|e| anyhow!("robot model: {e}"))?;
+    let (cn, guard) = pcr_nodes::startup(NodeKind::Driver, c)?;
+    let period = c.period().as_secs_f64();
+    let watchdog_s = 5.0 * period;
+    match a.backend {
+        Backend::Sim => {
+            let home: [i32; 3] = std::array::from_fn(|i| {
+                robot
+                    .kappa_to_steps(i, robot.home_kappa[i])
+                    .map_or(0, |s| s.round() as i32)
+            });
+            let start = sim_start(&cn, home)?;
+            let drv = safety_stack(
+                IdealDrive::new(start, max_step_rate(&robot)),
+                &robot,
+                watchdog_s,
+            );
+            let step = DriverStep::new(drv, FkPoseSensor::new(robot), period);
+            serve(c, cn, guard, step)
+        }
+        Backend::Serial => {
+            let serial = SerialDriver::open(SerialConfig::new(a.port.clone()))
+                .with_context(|| format!("serial port {}", a.port))?;
+            let drv = safety_stack(serial, &robot, watchdog_s);
+            let step = DriverStep::new(drv, NoPoseSensor, period);
+            serve(c, cn, guard, step)
+        }
+    }
+}
+
+/// Where the simulated motors are when this process starts. Real motors keep their position
+/// when the driver process restarts; the interim plant lives inside this process, so after a
+/// restart it adopts the setpoint the chain is holding (the supervisor pauses the program at the
+/// setpoint the previous driver executed last). On a fresh chain nobody publishes yet: home.
+fn sim_start(cn: &ChainNode, home: [i32; 3]) -> Result<[i32; 3]> {
+    let sub = cn.subscriber::<JointSetpoint>(s::JOINT_SETPOINT)?;
+    let end = std::time::Instant::now() + std::time::Duration::from_millis(200);
+    while std::time::Instant::now() < end {
+        if let Ok(Some(j)) = latest(&sub) {
+            tracing::info!(steps = ?j.steps, "sim: adopting the chain's held setpoint as the motor positions");
+            return Ok(j.steps);
+        }
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    Ok(home)
+}
+
+fn serve<D: Driver, P: PoseSensor>(
+    c: &CommonArgs,
+    cn: ChainNode,
+    guard: ProtocolGuard,
+    mut step: DriverStep<SafeDriver<D>, P>,
+) -> Result<()> {
+    let kind = NodeKind::Driver;
+    let sub = cn.subscriber::<JointSetpoint>(s::JOINT_SETPOINT)?;
+    let listener = cn.listener(s::JOINT_SETPOINT)?;
+    let pub_st = cn.publisher::<DriverStateMsg>(s::DRIVER_STATE)?;
+    let notify = cn.notifier(s::DRIVER_STATE)?;
+    let pub_hb = cn.publisher::<Heartbeat>(s::HEARTBEAT)?;
+    pcr_nodes::realtime::apply(c.rt_priority, c.cpu, c.mlockall);
+
+    let period_ns = c.period().as_nanos() as u64;
+    let mut stats = CycleStats::new(kind, c.protocol_version, period_ns);
+    let mut fresh_since_tick = false;
+    let mut fatal: Option<anyhow::Error> = None;
+
+    let ws = WaitSetBuilder::new()
+        .create::<ipc::Service>()
+        .map_err(|e| anyhow!("waitset: {e:?}"))?;
+    let ev = ws
+        .attach_notification(&listener)
+        .map_err(|e| anyhow!("attach: {e:?}"))?;
+    let tick = ws
+        .attach_interval(c.period())
+        .map_err(|e| anyhow!("interval: {e:?}"))?;
+    let hb = ws
+        .attach_interval(c.heartbeat())
+        .map_err(|e| anyhow!("interval: {e:?}"))?;
+
+    let r = pcr_nodes::run_waitset(&ws, |id| {
+        let mut run = |input: Option<&JointSetpoint>| -> bool {
+            let mut r = step.step(chain_time_s(), input);
+            if r.is_err() && step.driver().tripped() {
+                // This process stalled longer than the watchdog (it has held the drive
+                // meanwhile): re-arm and carry on; the rate limit bounds any catch-up.
+                tracing::warn!("driver process stalled: watchdog re-armed");
+                step.driver_mut().reset();
+                r = step.step(chain_time_s(), input);
+            }
+            match r {
+                Ok(st) => {
+                    let _ = pub_st.send_copy(st);
+                    let _ = notify.notify();
+                    true
+                }
+                Err(e) => {
+                    tracing::error!(driver = step.driver().name(), "driver: {e}");
+                    if matches!(e, pcr_driver::DriverError::Transport(_)) {
+                        fatal = Some(anyhow!("driver transport: {e}"));
+                        return false;
+                    }
+                    true
+                }
+            }
+        };
+        if id.has_event_from(&ev) {
+            let _ = listener.try_wait(|_| {});
+            let rx = monotonic_ns();
+            if let Ok(Some(mut j)) = latest(&sub) {
+                j.stamps.drv_rx_ns = rx;
+                fresh_since_tick = true;
+                if !run(Some(&j)) {
+                    return CallbackProgression::Stop;
+                }
+                let hop = rx.saturating_sub(j.stamps.ik_pub_ns);
+                stats.record(monotonic_ns() - rx, hop);
+            }
+        }
+        if id.has_event_from(&tick) {
+            if !fresh_since_tick {
+                stats.stale_input();
+                if !run(None) {
+                    return CallbackProgression::Stop;
+                }
+            }
+            fresh_since_tick = false;
+        }
+        if id.has_event_from(&hb) {
+            let _ = pub_hb.send_copy(stats.heartbeat(step.holding()));
+            pcr_nodes::recheck(&guard);
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(|e| anyhow!("waitset: {e:?}"))?;
+    pcr_nodes::log_end(kind, r);
+    eprintln!("{}", stats.summary());
+    match fatal {
+        Some(e) => Err(e),
+        None => Ok(()),
+    }
+}

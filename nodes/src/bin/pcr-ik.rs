@@ -1,0 +1,89 @@
+//! `pcr-ik`: the IK process. Wakes on the task-setpoint event, solves the newest setpoint and
+//! publishes the joint setpoint (+ event); heartbeats on an interval.
+
+use anyhow::{anyhow, Context, Result};
+use clap::Parser;
+use iceoryx2::prelude::*;
+use pcr_control::IkStep;
+use pcr_kinematics::Robot;
+use pcr_messages::{monotonic_ns, services as s, Heartbeat, JointSetpoint, NodeKind, TaskSetpoint};
+use pcr_nodes::{ports::latest, CommonArgs, CycleStats};
+use pcr_robot::RobotConfig;
+
+#[derive(Parser, Debug)]
+#[command(about = "pcr-ik: task setpoint -> motor steps")]
+struct Args {
+    #[command(flatten)]
+    common: CommonArgs,
+}
+
+fn main() -> std::process::ExitCode {
+    pcr_nodes::init_logging();
+    match run(Args::parse()) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("pcr-ik: error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(a: Args) -> Result<()> {
+    let kind = NodeKind::Ik;
+    let c = &a.common;
+    let robot_cfg = RobotConfig::load(&c.robot).with_context(|| format!("robot {}", c.robot))?;
+    let robot = Robot::new(&robot_cfg).map_err(|e| anyhow!("robot model: {e}"))?;
+    let (cn, guard) = pcr_nodes::startup(kind, c)?;
+    let sub = cn.subscriber::<TaskSetpoint>(s::TASK_SETPOINT)?;
+    let listener = cn.listener(s::TASK_SETPOINT)?;
+    let pub_j = cn.publisher::<JointSetpoint>(s::JOINT_SETPOINT)?;
+    let notify = cn.notifier(s::JOINT_SETPOINT)?;
+    let pub_hb = cn.publisher::<Heartbeat>(s::HEARTBEAT)?;
+    pcr_nodes::realtime::apply(c.rt_priority, c.cpu, c.mlockall);
+
+    let mut ik = IkStep::new(robot);
+    let period_ns = c.period().as_nanos() as u64;
+    let mut stats = CycleStats::new(kind, c.protocol_version, period_ns);
+    let mut last_rx = monotonic_ns();
+
+    let ws = WaitSetBuilder::new()
+        .create::<ipc::Service>()
+        .map_err(|e| anyhow!("waitset: {e:?}"))?;
+    let ev = ws
+        .attach_notification(&listener)
+        .map_err(|e| anyhow!("attach: {e:?}"))?;
+    let hb = ws
+        .attach_interval(c.heartbeat())
+        .map_err(|e| anyhow!("interval: {e:?}"))?;
+
+    let r = pcr_nodes::run_waitset(&ws, |id| {
+        if id.has_event_from(&ev) {
+            // Level-triggered: drain the event before anything else.
+            let _ = listener.try_wait(|_| {});
+            let rx = monotonic_ns();
+            if let Ok(Some(mut sp)) = latest(&sub) {
+                last_rx = rx;
+                sp.stamps.ik_rx_ns = rx;
+                let mut j = ik.step(&sp);
+                j.stamps.ik_pub_ns = monotonic_ns();
+                let _ = pub_j.send_copy(j);
+                let _ = notify.notify();
+                let hop = rx.saturating_sub(sp.stamps.interp_pub_ns);
+                stats.record(monotonic_ns() - rx, hop);
+            }
+        }
+        if id.has_event_from(&hb) {
+            let stale = monotonic_ns() - last_rx > 2 * period_ns;
+            if stale {
+                stats.stale_input();
+            }
+            let _ = pub_hb.send_copy(stats.heartbeat(stale));
+            pcr_nodes::recheck(&guard);
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(|e| anyhow!("waitset: {e:?}"))?;
+    pcr_nodes::log_end(kind, r);
+    eprintln!("{} ({} IK failures)", stats.summary(), ik.failures());
+    Ok(())
+}

@@ -1,0 +1,415 @@
+//! The supervisor's configuration (`configs/sim.toml`, `configs/lab.toml`): which processes to
+//! run with which backends, timing, restart policy, real-time settings. Every error names the
+//! offending key (`process[2].backend`, `restart.max_failures`).
+
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+/// A configuration error; the message names the key.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// The file cannot be read.
+    #[error("{path}: cannot read: {source}")]
+    Read {
+        /// File.
+        path: String,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// Not valid TOML.
+    #[error("{path}: not valid TOML: {message}")]
+    Syntax {
+        /// File.
+        path: String,
+        /// The parser's message (with line and column).
+        message: String,
+    },
+    /// A key is unknown, missing or of the wrong type.
+    #[error("{path}: key `{key}`: {message}")]
+    Key {
+        /// File.
+        path: String,
+        /// Dotted key path.
+        key: String,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+/// The processes the supervisor knows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ProcessName {
+    /// `pcr-planner`.
+    Planner,
+    /// `pcr-ik`.
+    Ik,
+    /// `pcr-driver`.
+    Driver,
+    /// `pcr-mocap`.
+    Mocap,
+}
+
+impl ProcessName {
+    /// The short name.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ProcessName::Planner => "planner",
+            ProcessName::Ik => "ik",
+            ProcessName::Driver => "driver",
+            ProcessName::Mocap => "mocap",
+        }
+    }
+    /// The binary's file name.
+    pub fn binary(self) -> String {
+        format!("pcr-{}", self.as_str())
+    }
+    /// The matching node kind.
+    pub fn kind(self) -> pcr_messages::NodeKind {
+        use pcr_messages::NodeKind as K;
+        match self {
+            ProcessName::Planner => K::Planner,
+            ProcessName::Ik => K::Ik,
+            ProcessName::Driver => K::Driver,
+            ProcessName::Mocap => K::Mocap,
+        }
+    }
+}
+
+/// Driver backends.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Backend {
+    /// Interim ideal drive (later the simulated plant).
+    Sim,
+    /// The firmware over a serial port.
+    Serial,
+}
+
+fn d_prefix() -> String {
+    "pcr_".into()
+}
+fn d_period() -> f64 {
+    20.0
+}
+fn d_hb() -> f64 {
+    100.0
+}
+fn d_hb_timeout() -> f64 {
+    1000.0
+}
+fn d_startup() -> f64 {
+    10_000.0
+}
+fn d_rec() -> String {
+    "out/recordings".into()
+}
+fn d_robot() -> String {
+    "configs/robot.toml".into()
+}
+
+/// Restart policy.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RestartConfig {
+    /// Failures of one process within `window_s` after which the supervisor stops restarting
+    /// and escalates to a safe stop.
+    #[serde(default = "RestartConfig::d_max")]
+    pub max_failures: u32,
+    /// Window of the failure count, s.
+    #[serde(default = "RestartConfig::d_window")]
+    pub window_s: f64,
+    /// First restart delay, ms (doubles per failure).
+    #[serde(default = "RestartConfig::d_b0")]
+    pub backoff_initial_ms: f64,
+    /// Largest restart delay, ms.
+    #[serde(default = "RestartConfig::d_b1")]
+    pub backoff_max_ms: f64,
+}
+
+impl RestartConfig {
+    fn d_max() -> u32 {
+        3
+    }
+    fn d_window() -> f64 {
+        60.0
+    }
+    fn d_b0() -> f64 {
+        100.0
+    }
+    fn d_b1() -> f64 {
+        2000.0
+    }
+}
+
+impl Default for RestartConfig {
+    fn default() -> Self {
+        Self {
+            max_failures: Self::d_max(),
+            window_s: Self::d_window(),
+            backoff_initial_ms: Self::d_b0(),
+            backoff_max_ms: Self::d_b1(),
+        }
+    }
+}
+
+/// Real-time settings shared by all processes.
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RealtimeConfig {
+    /// Lock the processes' memory (mlockall).
+    #[serde(default)]
+    pub mlockall: bool,
+}
+
+/// One process to run.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ProcessConfig {
+    /// Which process (`planner`, `ik`, `driver`, `mocap`).
+    pub name: ProcessName,
+    /// Driver backend (`sim`, `serial`); driver only.
+    pub backend: Option<Backend>,
+    /// Serial port of the serial backend.
+    pub port: Option<String>,
+    /// SCHED_FIFO priority 1..99 (0 = normal scheduling).
+    #[serde(default)]
+    pub priority: i32,
+    /// CPU affinity.
+    pub cpu: Option<usize>,
+    /// Extra command-line arguments.
+    #[serde(default)]
+    pub args: Vec<String>,
+}
+
+/// The supervisor configuration.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SupervisorConfig {
+    /// Robot configuration file (relative to the working directory).
+    #[serde(default = "d_robot")]
+    pub robot: String,
+    /// Prefix of every iceoryx2 file of the chain.
+    #[serde(default = "d_prefix")]
+    pub iceoryx2_prefix: String,
+    /// Control period, ms.
+    #[serde(default = "d_period")]
+    pub period_ms: f64,
+    /// Heartbeat period, ms.
+    #[serde(default = "d_hb")]
+    pub heartbeat_ms: f64,
+    /// A process without heartbeat for this long is hung, ms.
+    #[serde(default = "d_hb_timeout")]
+    pub heartbeat_timeout_ms: f64,
+    /// Time a started process has to send its first heartbeat, ms.
+    #[serde(default = "d_startup")]
+    pub startup_timeout_ms: f64,
+    /// Where recordings go.
+    #[serde(default = "d_rec")]
+    pub recording_dir: String,
+    /// Control socket (default `/tmp/pcr-supervisor-<prefix>.sock`).
+    pub control_socket: Option<String>,
+    /// Directory of the process binaries (default: the supervisor's own).
+    pub bin_dir: Option<String>,
+    /// Restart policy.
+    #[serde(default)]
+    pub restart: RestartConfig,
+    /// Real-time settings.
+    #[serde(default)]
+    pub realtime: RealtimeConfig,
+    /// The processes.
+    #[serde(default)]
+    pub process: Vec<ProcessConfig>,
+}
+
+impl SupervisorConfig {
+    /// Loads and validates a file.
+    pub fn load(path: impl AsRef<Path>) -> Result<Self, ConfigError> {
+        let p = path.as_ref();
+        let text = std::fs::read_to_string(p).map_err(|source| ConfigError::Read {
+            path: p.display().to_string(),
+            source,
+        })?;
+        Self::from_toml_str(&text, &p.display().to_string())
+    }
+
+    /// Parses and validates a TOML text (`origin` names it in errors).
+    pub fn from_toml_str(text: &str, origin: &str) -> Result<Self, ConfigError> {
+        let value: toml::Value = toml::from_str(text).map_err(|e| ConfigError::Syntax {
+            path: origin.into(),
+            message: e.to_string().trim().replace('\n', " | "),
+        })?;
+        let cfg: SupervisorConfig = serde_path_to_error::deserialize(value).map_err(|e| {
+            let key = e.path().to_string();
+            ConfigError::Key {
+                path: origin.into(),
+                key: if key == "." {
+                    "(top level)".into()
+                } else {
+                    key
+                },
+                message: e.into_inner().to_string(),
+            }
+        })?;
+        cfg.validate(origin)?;
+        Ok(cfg)
+    }
+
+    fn validate(&self, origin: &str) -> Result<(), ConfigError> {
+        let bad = |key: String, message: String| ConfigError::Key {
+            path: origin.into(),
+            key,
+            message,
+        };
+        for (k, v) in [
+            ("period_ms", self.period_ms),
+            ("heartbeat_ms", self.heartbeat_ms),
+            ("heartbeat_timeout_ms", self.heartbeat_timeout_ms),
+            ("startup_timeout_ms", self.startup_timeout_ms),
+            ("restart.window_s", self.restart.window_s),
+            (
+                "restart.backoff_initial_ms",
+                self.restart.backoff_initial_ms,
+            ),
+            ("restart.backoff_max_ms", self.restart.backoff_max_ms),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(bad(k.into(), format!("must be a positive number, got {v}")));
+            }
+        }
+        if self.heartbeat_timeout_ms <= 2.0 * self.heartbeat_ms {
+            return Err(bad(
+                "heartbeat_timeout_ms".into(),
+                format!(
+                    "must exceed twice heartbeat_ms ({} ms), got {}",
+                    self.heartbeat_ms, self.heartbeat_timeout_ms
+                ),
+            ));
+        }
+        if self.iceoryx2_prefix.is_empty()
+            || !self
+                .iceoryx2_prefix
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+        {
+            return Err(bad(
+                "iceoryx2_prefix".into(),
+                format!(
+                    "must be non-empty ASCII letters, digits, '_' or '-', got {:?}",
+                    self.iceoryx2_prefix
+                ),
+            ));
+        }
+        let mut seen = Vec::new();
+        for (i, p) in self.process.iter().enumerate() {
+            let key = |k: &str| format!("process[{i}].{k}");
+            if seen.contains(&p.name) {
+                return Err(bad(
+                    key("name"),
+                    format!("{} listed twice", p.name.as_str()),
+                ));
+            }
+            seen.push(p.name);
+            if !(0..=99).contains(&p.priority) {
+                return Err(bad(
+                    key("priority"),
+                    format!("must be 0..=99, got {}", p.priority),
+                ));
+            }
+            match (p.name, p.backend) {
+                (ProcessName::Driver, None) => {
+                    return Err(bad(key("backend"), "missing (sim or serial)".into()))
+                }
+                (ProcessName::Driver, Some(Backend::Serial)) if p.port.is_none() => {
+                    return Err(bad(key("port"), "the serial backend needs a port".into()))
+                }
+                (ProcessName::Driver, _) => {}
+                (n, Some(_)) => {
+                    return Err(bad(
+                        key("backend"),
+                        format!("only the driver has a backend, not {}", n.as_str()),
+                    ))
+                }
+                _ => {}
+            }
+            if p.port.is_some() && p.name != ProcessName::Driver {
+                return Err(bad(key("port"), "only the driver has a port".into()));
+            }
+        }
+        for needed in [ProcessName::Planner, ProcessName::Ik, ProcessName::Driver] {
+            if !seen.contains(&needed) {
+                return Err(bad(
+                    "process".into(),
+                    format!("the chain needs a [[process]] named {}", needed.as_str()),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The control socket path.
+    pub fn socket_path(&self) -> PathBuf {
+        match &self.control_socket {
+            Some(p) => PathBuf::from(p),
+            None => {
+                std::env::temp_dir().join(format!("pcr-supervisor-{}.sock", self.iceoryx2_prefix))
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const OK: &str = r#"
+robot = "configs/robot.toml"
+[[process]]
+name = "planner"
+[[process]]
+name = "ik"
+[[process]]
+name = "driver"
+backend = "sim"
+"#;
+
+    fn err(text: &str) -> String {
+        SupervisorConfig::from_toml_str(text, "t.toml")
+            .unwrap_err()
+            .to_string()
+    }
+
+    #[test]
+    fn minimal_config_loads_with_defaults() {
+        let c = SupervisorConfig::from_toml_str(OK, "t").unwrap();
+        assert_eq!(c.period_ms, 20.0);
+        assert_eq!(c.process.len(), 3);
+        assert_eq!(c.restart.max_failures, 3);
+    }
+
+    #[test]
+    fn errors_name_the_key() {
+        let e = err(&OK.replace("backend = \"sim\"", "backend = \"warp\""));
+        assert!(e.contains("process[2].backend"), "{e}");
+        let e = err(&format!("{OK}\n[restart]\nmax_failures = \"three\"\n"));
+        assert!(e.contains("restart.max_failures"), "{e}");
+        let e = err(&format!("period_ms = -1.0\n{OK}"));
+        assert!(e.contains("period_ms"), "{e}");
+        let e = err(&format!("colour = 1\n{OK}"));
+        assert!(e.contains("colour"), "{e}");
+        let e = err(&OK.replace("backend = \"sim\"", "backend = \"serial\""));
+        assert!(e.contains("process[2].port"), "{e}");
+        let e = err("[[process]]\nname = \"ik\"\n");
+        assert!(e.contains("planner"), "{e}");
+        let e = err("period_ms = ");
+        assert!(e.contains("not valid TOML"), "{e}");
+    }
+
+    #[test]
+    fn shipped_configs_load() {
+        let root = concat!(env!("CARGO_MANIFEST_DIR"), "/../configs/");
+        for f in ["sim.toml", "lab.toml"] {
+            SupervisorConfig::load(format!("{root}{f}")).unwrap();
+        }
+    }
+}

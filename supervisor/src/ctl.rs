@@ -1,0 +1,147 @@
+//! The control interface: one text line per request over a Unix stream socket, one text reply
+//! (`pcr-supervisor ctl --config <file> status`).
+//!
+//! Requests: `status`, `run paper|circle|square`, `run moves <move>; <move>; ...` with moves
+//! `line X Y PHI_DEG SPEED`, `circle CX CY R SPEED`, `dwell S` (mm, deg, mm/s, s),
+//! `pause`, `resume`, `stop`, `reset` (re-arm after a safe stop), `shutdown`.
+
+use pcr_control::Move;
+use pcr_kinematics::Pose;
+use std::io::{BufRead, BufReader, Write};
+use std::os::unix::net::UnixStream;
+use std::path::Path;
+use std::time::Duration;
+
+/// A parsed request.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Request {
+    /// Report the state.
+    Status,
+    /// Run a built-in program (`paper`, `circle`, `square`).
+    RunBuiltin(String),
+    /// Run a list of moves.
+    RunMoves(Vec<Move>),
+    /// Pause the motion.
+    Pause,
+    /// Resume it.
+    Resume,
+    /// Stop it (hold).
+    Stop,
+    /// Re-arm after a safe stop.
+    Reset,
+    /// Shut the chain down.
+    Shutdown,
+}
+
+fn nums(parts: &[&str], n: usize, what: &str) -> Result<Vec<f64>, String> {
+    if parts.len() != n {
+        return Err(format!("{what}: expected {n} numbers, got {}", parts.len()));
+    }
+    parts
+        .iter()
+        .map(|p| {
+            p.parse::<f64>()
+                .map_err(|_| format!("{what}: {p:?} is not a number"))
+        })
+        .collect()
+}
+
+/// Parses `line X Y PHI_DEG SPEED; circle CX CY R SPEED; dwell S`.
+pub fn parse_moves(text: &str) -> Result<Vec<Move>, String> {
+    let mut v = Vec::new();
+    for m in text.split(';').map(str::trim).filter(|s| !s.is_empty()) {
+        let w: Vec<&str> = m.split_whitespace().collect();
+        match w[0] {
+            "line" => {
+                let a = nums(&w[1..], 4, "line")?;
+                v.push(Move::Line {
+                    to: Pose::from_mm_deg(a[0], a[1], a[2]),
+                    speed_mm_s: a[3],
+                });
+            }
+            "circle" => {
+                let a = nums(&w[1..], 4, "circle")?;
+                v.push(Move::Circle {
+                    centre: [a[0], a[1]],
+                    radius_mm: a[2],
+                    speed_mm_s: a[3],
+                    phi: 0.0,
+                });
+            }
+            "dwell" => {
+                let a = nums(&w[1..], 1, "dwell")?;
+                v.push(Move::Dwell { duration_s: a[0] });
+            }
+            o => return Err(format!("unknown move {o:?} (line, circle, dwell)")),
+        }
+    }
+    if v.is_empty() {
+        return Err("no moves".into());
+    }
+    Ok(v)
+}
+
+/// Parses one request line.
+pub fn parse(line: &str) -> Result<Request, String> {
+    let line = line.trim();
+    let (head, rest) = line.split_once(' ').unwrap_or((line, ""));
+    Ok(match head {
+        "status" => Request::Status,
+        "pause" => Request::Pause,
+        "resume" => Request::Resume,
+        "stop" => Request::Stop,
+        "reset" => Request::Reset,
+        "shutdown" => Request::Shutdown,
+        "run" => {
+            let rest = rest.trim();
+            match rest.split_once(' ') {
+                Some(("moves", m)) => Request::RunMoves(parse_moves(m)?),
+                _ if matches!(rest, "paper" | "circle" | "square") => {
+                    Request::RunBuiltin(rest.into())
+                }
+                _ => {
+                    return Err(format!(
+                        "run what? {rest:?} (paper, circle, square, moves ...)"
+                    ))
+                }
+            }
+        }
+        o => return Err(format!("unknown command {o:?}")),
+    })
+}
+
+/// Sends one request and returns the reply (client side).
+pub fn request(socket: &Path, line: &str) -> std::io::Result<String> {
+    let mut s = UnixStream::connect(socket)?;
+    s.set_read_timeout(Some(Duration::from_secs(5)))?;
+    writeln!(s, "{line}")?;
+    s.shutdown(std::net::Shutdown::Write)?;
+    let mut out = String::new();
+    for l in BufReader::new(s).lines() {
+        out.push_str(&l?);
+        out.push('\n');
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_requests() {
+        assert_eq!(parse("status").unwrap(), Request::Status);
+        assert_eq!(
+            parse("run paper").unwrap(),
+            Request::RunBuiltin("paper".into())
+        );
+        let Request::RunMoves(m) =
+            parse("run moves line 10 0 0 20; dwell 1; circle 0 0 30 40").unwrap()
+        else {
+            panic!()
+        };
+        assert_eq!(m.len(), 3);
+        assert!(parse("run moves line 1 2").is_err());
+        assert!(parse("fly").is_err());
+    }
+}

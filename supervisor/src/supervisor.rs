@@ -1,0 +1,882 @@
+//! The supervision loop: one iceoryx2 WaitSet interval (20 ms) that watches the children, drains
+//! heartbeats, status and driver states (recording), serves the control socket and runs programs.
+
+use crate::config::{Backend, ProcessConfig, ProcessName, SupervisorConfig};
+use crate::ctl::{self, Request};
+use anyhow::{anyhow, Context, Result};
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::*;
+use pcr_control::{command_of_moves, simple_command, Accuracy, Recorder};
+use pcr_messages::{
+    command_kind, planner_state, program_id, services as s, Command, DriverStateMsg, Heartbeat,
+    NodeKind, PlannerStatus, PROTOCOL_VERSION,
+};
+use pcr_nodes::{ChainNode, ProtocolGuard};
+use std::collections::VecDeque;
+use std::fs::File;
+use std::io::{BufRead, BufReader, BufWriter, Write};
+use std::os::unix::net::{UnixListener, UnixStream};
+use std::os::unix::process::CommandExt;
+use std::path::PathBuf;
+use std::process::{Child, Stdio};
+use std::time::{Duration, Instant};
+
+/// Exit code after a safe stop.
+pub const EXIT_SAFE_STOP: i32 = 2;
+/// Exit code when a `--run` program failed (refused, aborted, timed out).
+pub const EXIT_RUN_FAILED: i32 = 1;
+
+/// Options from the command line.
+#[derive(Debug, Clone, Default)]
+pub struct Options {
+    /// Run this program (`paper`, `circle`, `square`) and exit.
+    pub run: Option<String>,
+    /// Directory of the process binaries.
+    pub bin_dir: PathBuf,
+}
+
+struct Proc {
+    cfg: ProcessConfig,
+    child: Option<Child>,
+    started: Instant,
+    last_hb: Option<Instant>,
+    hb: Heartbeat,
+    prev_misses: u64,
+    prev_cycles: u64,
+    restarts: u32,
+    failures: VecDeque<Instant>,
+    backoff: Duration,
+    restart_at: Option<Instant>,
+    gave_up: bool,
+}
+
+impl Proc {
+    fn name(&self) -> &'static str {
+        self.cfg.name.as_str()
+    }
+    fn pid(&self) -> Option<u32> {
+        self.child.as_ref().map(|c| c.id())
+    }
+    fn healthy(&self) -> bool {
+        self.child.is_some() && self.last_hb.is_some_and(|h| h >= self.started)
+    }
+    fn misses(&self) -> u64 {
+        self.prev_misses + self.hb.deadline_misses
+    }
+    fn cycles(&self) -> u64 {
+        self.prev_cycles + self.hb.cycles
+    }
+}
+
+struct Run {
+    id: u32,
+    name: String,
+    path: PathBuf,
+    recorder: Recorder<BufWriter<File>>,
+    acc: Accuracy,
+    started: Instant,
+    ended: Option<(Instant, &'static str)>,
+    paused_by_supervisor: bool,
+    user_paused: bool,
+    duration_s: f64,
+    progress_s: f64,
+    /// The newest driver state of this run reports the motors at rest.
+    settled: bool,
+}
+
+/// The supervisor.
+pub struct Supervisor {
+    cfg: SupervisorConfig,
+    opts: Options,
+    robot_path: PathBuf,
+    procs: Vec<Proc>,
+    node: ChainNode,
+    guard: ProtocolGuard,
+    pub_cmd: Publisher<ipc::Service, Command, ()>,
+    sub_hb: Subscriber<ipc::Service, Heartbeat, ()>,
+    sub_state: Subscriber<ipc::Service, DriverStateMsg, ()>,
+    sub_status: Subscriber<ipc::Service, PlannerStatus, ()>,
+    socket: UnixListener,
+    socket_path: PathBuf,
+    run: Option<Run>,
+    next_run_id: u32,
+    safe_stop: Option<String>,
+    exit: Option<i32>,
+    requested_run_started: bool,
+    last_hello: Instant,
+    start: Instant,
+    last_summary: Option<String>,
+}
+
+fn ms(v: f64) -> Duration {
+    Duration::from_secs_f64(v * 1e-3)
+}
+
+impl Supervisor {
+    /// Sets up the supervisor's node, ports and control socket (no process started yet).
+    pub fn new(cfg: SupervisorConfig, opts: Options) -> Result<Self> {
+        let robot_path = std::fs::canonicalize(&cfg.robot)
+            .with_context(|| format!("key `robot`: robot configuration {:?}", cfg.robot))?;
+        for p in &cfg.process {
+            let b = opts.bin_dir.join(p.name.binary());
+            if !b.exists() {
+                return Err(anyhow!(
+                    "process {}: binary {} not found (build with `cargo build -p pcr-nodes`, or \
+                     set `bin_dir`)",
+                    p.name.as_str(),
+                    b.display()
+                ));
+            }
+        }
+        let node = ChainNode::new(
+            &format!("pcr-supervisor-{}", std::process::id()),
+            &cfg.iceoryx2_prefix,
+            PROTOCOL_VERSION,
+        )?;
+        let guard = ProtocolGuard::new(&node, NodeKind::Supervisor)?;
+        if let Err(m) = guard.handshake(Duration::from_millis(200)) {
+            return Err(anyhow!("{}", m.message));
+        }
+        let pub_cmd = node.publisher::<Command>(s::COMMAND)?;
+        let sub_hb = node.subscriber::<Heartbeat>(s::HEARTBEAT)?;
+        let sub_state = node.subscriber::<DriverStateMsg>(s::DRIVER_STATE)?;
+        let sub_status = node.subscriber::<PlannerStatus>(s::STATUS)?;
+        let socket_path = cfg.socket_path();
+        if socket_path.exists() {
+            if UnixStream::connect(&socket_path).is_ok() {
+                return Err(anyhow!(
+                    "another supervisor is listening on {}",
+                    socket_path.display()
+                ));
+            }
+            let _ = std::fs::remove_file(&socket_path);
+        }
+        let socket = UnixListener::bind(&socket_path)
+            .with_context(|| format!("control socket {}", socket_path.display()))?;
+        socket.set_nonblocking(true)?;
+        let now = Instant::now();
+        let procs = cfg
+            .process
+            .iter()
+            .map(|p| Proc {
+                cfg: p.clone(),
+                child: None,
+                started: now,
+                last_hb: None,
+                hb: Heartbeat::default(),
+                prev_misses: 0,
+                prev_cycles: 0,
+                restarts: 0,
+                failures: VecDeque::new(),
+                backoff: ms(cfg.restart.backoff_initial_ms),
+                restart_at: Some(now),
+                gave_up: false,
+            })
+            .collect();
+        Ok(Self {
+            cfg,
+            opts,
+            robot_path,
+            procs,
+            node,
+            guard,
+            pub_cmd,
+            sub_hb,
+            sub_state,
+            sub_status,
+            socket,
+            socket_path,
+            run: None,
+            next_run_id: 1,
+            safe_stop: None,
+            exit: None,
+            requested_run_started: false,
+            last_hello: now,
+            start: now,
+            last_summary: None,
+        })
+    }
+
+    fn spawn(&mut self, i: usize) {
+        let cfg = &self.cfg;
+        let p = &self.procs[i];
+        let bin = self.opts.bin_dir.join(p.cfg.name.binary());
+        let mut cmd = std::process::Command::new(&bin);
+        cmd.arg("--prefix")
+            .arg(&cfg.iceoryx2_prefix)
+            .arg("--period-ms")
+            .arg(cfg.period_ms.to_string())
+            .arg("--heartbeat-ms")
+            .arg(cfg.heartbeat_ms.to_string())
+            .arg("--robot")
+            .arg(&self.robot_path)
+            .arg("--rt-priority")
+            .arg(p.cfg.priority.to_string());
+        if let Some(c) = p.cfg.cpu {
+            cmd.arg("--cpu").arg(c.to_string());
+        }
+        if cfg.realtime.mlockall {
+            cmd.arg("--mlockall");
+        }
+        match p.cfg.backend {
+            Some(Backend::Sim) => {
+                cmd.arg("--backend").arg("sim");
+            }
+            Some(Backend::Serial) => {
+                cmd.arg("--backend").arg("serial");
+                cmd.arg("--port").arg(p.cfg.port.as_deref().unwrap_or(""));
+            }
+            None => {}
+        }
+        cmd.args(&p.cfg.args).stdin(Stdio::null()).process_group(0);
+        // SAFETY: prctl is async-signal-safe; the child dies with the supervisor.
+        unsafe {
+            cmd.pre_exec(|| {
+                libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
+                Ok(())
+            });
+        }
+        let now = Instant::now();
+        let p = &mut self.procs[i];
+        match cmd.spawn() {
+            Ok(child) => {
+                eprintln!(
+                    "pcr-supervisor: started {} (pid {}){}",
+                    p.name(),
+                    child.id(),
+                    if p.restarts > 0 {
+                        format!(", restart #{}", p.restarts)
+                    } else {
+                        String::new()
+                    }
+                );
+                p.child = Some(child);
+                p.started = now;
+                p.last_hb = None;
+                p.restart_at = None;
+            }
+            Err(e) => {
+                eprintln!("pcr-supervisor: cannot start {}: {e}", bin.display());
+                self.failed(i, format!("cannot start: {e}"));
+            }
+        }
+    }
+
+    fn failed(&mut self, i: usize, why: String) {
+        let now = Instant::now();
+        let window = Duration::from_secs_f64(self.cfg.restart.window_s);
+        let max_failures = self.cfg.restart.max_failures;
+        let backoff_max = ms(self.cfg.restart.backoff_max_ms);
+        let p = &mut self.procs[i];
+        p.prev_misses += p.hb.deadline_misses;
+        p.prev_cycles += p.hb.cycles;
+        p.hb = Heartbeat::default();
+        p.child = None;
+        p.failures.push_back(now);
+        while p.failures.front().is_some_and(|t| now - *t > window) {
+            p.failures.pop_front();
+        }
+        let name = p.name();
+        let is_planner = p.cfg.name == ProcessName::Planner;
+        if p.failures.len() as u32 > max_failures {
+            p.gave_up = true;
+            let msg = format!(
+                "{name} failed {} times within {} s (last: {why})",
+                p.failures.len(),
+                self.cfg.restart.window_s
+            );
+            eprintln!("pcr-supervisor: {name} failed ({why}); giving up");
+            self.safe_stop(msg);
+            return;
+        }
+        p.restarts += 1;
+        p.restart_at = Some(now + p.backoff);
+        eprintln!(
+            "pcr-supervisor: {name} failed ({why}); restart #{} in {} ms",
+            p.restarts,
+            p.backoff.as_millis()
+        );
+        p.backoff = (p.backoff * 2).min(backoff_max);
+        if let Some(run) = &mut self.run {
+            if run.ended.is_none() {
+                if is_planner {
+                    eprintln!(
+                        "pcr-supervisor: run {} aborted: the planner restarts idle; the robot \
+                         holds where it is (safe stop of the motion)",
+                        run.id
+                    );
+                    run.ended = Some((now, "aborted (planner failed)"));
+                } else if !run.paused_by_supervisor {
+                    run.paused_by_supervisor = true;
+                    eprintln!(
+                        "pcr-supervisor: run {} paused while {name} restarts",
+                        run.id
+                    );
+                    let _ = self
+                        .pub_cmd
+                        .send_copy(simple_command(command_kind::PAUSE, 0, run.id));
+                }
+            }
+        }
+    }
+
+    fn safe_stop(&mut self, why: String) {
+        if let Some(first) = &self.safe_stop {
+            eprintln!("pcr-supervisor: (already in safe stop: {first}) also: {why}");
+            return;
+        }
+        eprintln!("pcr-supervisor: SAFE STOP: {why}");
+        let _ = self
+            .pub_cmd
+            .send_copy(simple_command(command_kind::STOP, 0, 0));
+        if let Some(run) = &mut self.run {
+            if run.ended.is_none() {
+                run.ended = Some((Instant::now(), "safe stop"));
+            }
+        }
+        self.safe_stop = Some(why);
+        if self.opts.run.is_some() {
+            self.exit = Some(EXIT_SAFE_STOP);
+        }
+    }
+
+    fn all_healthy(&self) -> bool {
+        self.procs.iter().all(Proc::healthy)
+    }
+
+    fn start_run(&mut self, name: &str, cmd: Result<Command, String>) -> Result<String, String> {
+        if let Some(why) = &self.safe_stop {
+            return Err(format!("safe stop ({why}); send `reset` first"));
+        }
+        if self.run.as_ref().is_some_and(|r| r.ended.is_none()) {
+            return Err("a run is in progress; `stop` it first".into());
+        }
+        if !self.all_healthy() {
+            return Err("not all processes are up yet".into());
+        }
+        let mut cmd = cmd?;
+        let id = self.next_run_id;
+        self.next_run_id += 1;
+        cmd.run_id = id;
+        let dir = PathBuf::from(&self.cfg.recording_dir);
+        std::fs::create_dir_all(&dir).map_err(|e| format!("recording dir {dir:?}: {e}"))?;
+        let stamp = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_secs());
+        let path = dir.join(format!("{name}-{stamp}-run{id}.csv"));
+        let f = File::create(&path).map_err(|e| format!("recording {path:?}: {e}"))?;
+        let backend = self
+            .procs
+            .iter()
+            .find_map(|p| p.cfg.backend)
+            .map_or("?", |b| match b {
+                Backend::Sim => "pcr-supervisor, interim ideal drive (sim)",
+                Backend::Serial => "pcr-supervisor, serial driver",
+            });
+        let created = stamp.to_string();
+        let robot = self.robot_path.display().to_string();
+        let recorder = Recorder::new(
+            BufWriter::new(f),
+            &[
+                ("robot", robot.as_str()),
+                ("source", backend),
+                ("created", created.as_str()),
+                ("program", name),
+            ],
+        )
+        .map_err(|e| format!("recording: {e}"))?;
+        self.pub_cmd
+            .send_copy(cmd)
+            .map_err(|e| format!("command: {e:?}"))?;
+        eprintln!(
+            "pcr-supervisor: run {id} ({name}) started, recording {}",
+            path.display()
+        );
+        self.run = Some(Run {
+            id,
+            name: name.into(),
+            path: path.clone(),
+            recorder,
+            acc: Accuracy::default(),
+            started: Instant::now(),
+            ended: None,
+            paused_by_supervisor: false,
+            user_paused: false,
+            duration_s: 0.0,
+            progress_s: 0.0,
+            settled: false,
+        });
+        Ok(format!(
+            "run {id} ({name}) started; recording {}",
+            path.display()
+        ))
+    }
+
+    fn builtin(name: &str) -> Result<Command, String> {
+        let p = match name {
+            "paper" => program_id::PAPER,
+            "circle" => program_id::CIRCLE,
+            "square" => program_id::SQUARE,
+            o => return Err(format!("unknown program {o:?} (paper, circle, square)")),
+        };
+        Ok(simple_command(command_kind::RUN, p, 0))
+    }
+
+    fn handle(&mut self, req: Request) -> String {
+        let run_id = self.run.as_ref().map_or(0, |r| r.id);
+        match req {
+            Request::Status => self.status_text(),
+            Request::RunBuiltin(n) => {
+                let c = Self::builtin(&n);
+                self.start_run(&n, c)
+                    .unwrap_or_else(|e| format!("error: {e}"))
+            }
+            Request::RunMoves(m) => {
+                let c = command_of_moves(0, &m).map_err(|e| e.to_string());
+                self.start_run("moves", c)
+                    .unwrap_or_else(|e| format!("error: {e}"))
+            }
+            Request::Pause | Request::Resume | Request::Stop => {
+                let (k, word) = match req {
+                    Request::Pause => (command_kind::PAUSE, "paused"),
+                    Request::Resume => (command_kind::RESUME, "resumed"),
+                    _ => (command_kind::STOP, "stopped"),
+                };
+                if let Some(r) = &mut self.run {
+                    r.user_paused = k == command_kind::PAUSE;
+                }
+                match self.pub_cmd.send_copy(simple_command(k, 0, run_id)) {
+                    Ok(_) => word.into(),
+                    Err(e) => format!("error: {e:?}"),
+                }
+            }
+            Request::Reset => {
+                self.safe_stop = None;
+                let now = Instant::now();
+                for p in &mut self.procs {
+                    p.failures.clear();
+                    p.backoff = ms(self.cfg.restart.backoff_initial_ms);
+                    if p.gave_up {
+                        p.gave_up = false;
+                        p.restart_at = Some(now);
+                    }
+                }
+                "reset: safe stop cleared, failed processes restart".into()
+            }
+            Request::Shutdown => {
+                self.exit = Some(0);
+                "shutting down".into()
+            }
+        }
+    }
+
+    fn status_text(&self) -> String {
+        let mut out = String::new();
+        let state = match (&self.safe_stop, self.all_healthy()) {
+            (Some(w), _) => format!("safe-stop ({w})"),
+            (None, true) => "ready".into(),
+            (None, false) => "degraded (processes starting or restarting)".into(),
+        };
+        out.push_str(&format!(
+            "state: {state}; protocol v{PROTOCOL_VERSION}; prefix {}; up {:.1} s\n",
+            self.cfg.iceoryx2_prefix,
+            self.start.elapsed().as_secs_f64()
+        ));
+        match &self.run {
+            Some(r) => out.push_str(&format!(
+                "run {} ({}): {}; progress {:.1}/{:.1} s; recorded rows {}; accuracy over {}\n",
+                r.id,
+                r.name,
+                r.ended.map_or(
+                    if r.user_paused || r.paused_by_supervisor {
+                        "paused"
+                    } else {
+                        "running"
+                    },
+                    |e| e.1
+                ),
+                r.progress_s,
+                r.duration_s,
+                r.recorder.rows(),
+                r.acc
+            )),
+            None => out.push_str("run: none\n"),
+        }
+        if let Some(l) = &self.last_summary {
+            out.push_str(&format!("last run: {l}\n"));
+        }
+        for p in &self.procs {
+            let h = &p.hb;
+            out.push_str(&format!(
+                "process {}: {} pid {}; restarts {}; deadline misses {} over {} cycles; cycle \
+                 p50/p99/max {:.0}/{:.0}/{:.0} us; jitter p50/p99/max {:.0}/{:.0}/{:.0} us; \
+                 stale inputs {}; holding {}\n",
+                p.name(),
+                if p.gave_up {
+                    "FAILED"
+                } else if p.healthy() {
+                    "up"
+                } else {
+                    "starting"
+                },
+                p.pid().map_or("-".into(), |x| x.to_string()),
+                p.restarts,
+                p.misses(),
+                p.cycles(),
+                h.cycle_ns[0] as f64 / 1e3,
+                h.cycle_ns[1] as f64 / 1e3,
+                h.cycle_ns[2] as f64 / 1e3,
+                h.jitter_ns[0] as f64 / 1e3,
+                h.jitter_ns[1] as f64 / 1e3,
+                h.jitter_ns[2] as f64 / 1e3,
+                h.stale_inputs,
+                h.holding != 0
+            ));
+        }
+        out
+    }
+
+    fn serve_socket(&mut self) {
+        loop {
+            let (stream, _) = match self.socket.accept() {
+                Ok(s) => s,
+                Err(_) => return,
+            };
+            let _ = stream.set_nonblocking(false);
+            let _ = stream.set_read_timeout(Some(Duration::from_millis(500)));
+            let mut line = String::new();
+            let mut r = BufReader::new(&stream);
+            let reply = match r.read_line(&mut line) {
+                Ok(_) => match ctl::parse(&line) {
+                    Ok(req) => self.handle(req),
+                    Err(e) => format!("error: {e}"),
+                },
+                Err(e) => format!("error: {e}"),
+            };
+            let mut w = &stream;
+            let _ = w.write_all(reply.as_bytes());
+            if !reply.ends_with('\n') {
+                let _ = w.write_all(b"\n");
+            }
+        }
+    }
+
+    /// One supervision cycle.
+    fn tick(&mut self) {
+        let now = Instant::now();
+        // Heartbeats.
+        while let Ok(Some(smp)) = self.sub_hb.receive() {
+            let hb = *smp.payload();
+            if let Some(i) = self.procs.iter().position(|p| p.pid() == Some(hb.pid)) {
+                if hb.version != PROTOCOL_VERSION {
+                    eprintln!(
+                        "pcr-supervisor: {}",
+                        pcr_messages::version_mismatch_message(
+                            PROTOCOL_VERSION,
+                            hb.version,
+                            self.procs[i].name()
+                        )
+                    );
+                    continue;
+                }
+                self.procs[i].last_hb = Some(now);
+                self.procs[i].hb = hb;
+            }
+        }
+        if now - self.last_hello > ms(self.cfg.heartbeat_ms) {
+            self.last_hello = now;
+            pcr_nodes::recheck(&self.guard);
+        }
+        // Children: exited, hung, due for a restart.
+        let hb_timeout = ms(self.cfg.heartbeat_timeout_ms);
+        let startup_timeout = ms(self.cfg.startup_timeout_ms);
+        for i in 0..self.procs.len() {
+            let p = &mut self.procs[i];
+            if let Some(child) = &mut p.child {
+                if let Ok(Some(status)) = child.try_wait() {
+                    if status.code() == Some(pcr_nodes::EXIT_VERSION_MISMATCH) {
+                        // Restarting the same binary cannot help.
+                        let name = p.name();
+                        p.child = None;
+                        p.gave_up = true;
+                        self.safe_stop(format!(
+                            "{name} refused to connect: protocol version mismatch (its binary \
+                             is from another revision); not restarting"
+                        ));
+                        continue;
+                    }
+                    self.failed(i, format!("exited: {status}"));
+                    continue;
+                }
+                let hung = match p.last_hb {
+                    Some(h) if h >= p.started => now - h > hb_timeout,
+                    _ => now - p.started > startup_timeout,
+                };
+                if hung {
+                    let silent = now - p.last_hb.unwrap_or(p.started);
+                    let _ = child.kill();
+                    let _ = child.wait();
+                    self.failed(
+                        i,
+                        format!("hung: no heartbeat for {} ms; killed", silent.as_millis()),
+                    );
+                    continue;
+                }
+                if p.healthy()
+                    && p.failures.is_empty()
+                    && p.backoff > ms(self.cfg.restart.backoff_initial_ms)
+                {
+                    p.backoff = ms(self.cfg.restart.backoff_initial_ms);
+                }
+            } else if !p.gave_up
+                && self.safe_stop.is_none()
+                && p.restart_at.is_some_and(|t| t <= now)
+            {
+                self.spawn(i);
+            }
+        }
+        // Resume a run paused by the supervisor once everybody is back.
+        let healthy = self.all_healthy();
+        if let Some(run) = &mut self.run {
+            if run.ended.is_none() && run.paused_by_supervisor && healthy {
+                run.paused_by_supervisor = false;
+                if !run.user_paused {
+                    eprintln!("pcr-supervisor: run {} resumed", run.id);
+                    let _ = self
+                        .pub_cmd
+                        .send_copy(simple_command(command_kind::RESUME, 0, run.id));
+                }
+            }
+        }
+        // Driver states: record.
+        let mut stop = false;
+        while let Ok(Some(smp)) = self.sub_state.receive() {
+            if let Some(run) = &mut self.run {
+                let st = smp.payload();
+                if st.run_id == run.id && !run_over(run, now) {
+                    let _ = run.recorder.row(st);
+                    run.acc.add(st);
+                    run.settled = st.flags & pcr_messages::driver_flags::MOVING == 0;
+                    if st.flags & pcr_messages::driver_flags::FAULT != 0 && run.ended.is_none() {
+                        run.ended = Some((now, "drive fault"));
+                        eprintln!(
+                            "pcr-supervisor: run {} stopped: drive fault (latched in the drive, \
+                             which holds position; clear it at the drive)",
+                            run.id
+                        );
+                        stop = true;
+                    }
+                }
+            }
+        }
+        if stop {
+            let _ = self
+                .pub_cmd
+                .send_copy(simple_command(command_kind::STOP, 0, 0));
+        }
+        // Planner status.
+        while let Ok(Some(smp)) = self.sub_status.receive() {
+            let st = *smp.payload();
+            if let Some(run) = &mut self.run {
+                if st.run_id == run.id {
+                    run.progress_s = st.progress_s;
+                    run.duration_s = st.duration_s;
+                    if run.ended.is_none() {
+                        match st.state {
+                            planner_state::DONE => run.ended = Some((now, "done")),
+                            planner_state::STOPPED => run.ended = Some((now, "stopped")),
+                            planner_state::REFUSED => run.ended = Some((now, "refused")),
+                            _ => {}
+                        }
+                    }
+                }
+            }
+        }
+        self.finish_run_if_over(now);
+        // Start the requested program once everybody is up.
+        if let Some(name) = self.opts.run.clone() {
+            if !self.requested_run_started && self.all_healthy() && self.safe_stop.is_none() {
+                // Give the planner a few cycles to connect to the command service.
+                if self.procs.iter().all(|p| p.hb.seq >= 3) {
+                    self.requested_run_started = true;
+                    let c = Self::builtin(&name);
+                    if let Err(e) = self.start_run(&name, c) {
+                        eprintln!("pcr-supervisor: cannot run {name}: {e}");
+                        self.exit = Some(EXIT_RUN_FAILED);
+                    }
+                }
+            }
+            if !self.requested_run_started
+                && now - self.start > startup_timeout + ms(5000.0)
+                && self.exit.is_none()
+            {
+                eprintln!("pcr-supervisor: the chain did not come up; giving up on --run");
+                self.exit = Some(EXIT_RUN_FAILED);
+            }
+        }
+        self.serve_socket();
+    }
+
+    fn finish_run_if_over(&mut self, now: Instant) {
+        let over = self.run.as_ref().is_some_and(|r| run_over(r, now));
+        // A run without progress for far longer than planned is stuck.
+        let stuck = self.run.as_ref().is_some_and(|r| {
+            r.ended.is_none()
+                && !r.user_paused
+                && now - r.started > Duration::from_secs_f64(r.duration_s * 3.0 + 60.0)
+        });
+        if stuck {
+            if let Some(r) = &mut self.run {
+                r.ended = Some((now, "timed out"));
+            }
+            return;
+        }
+        if !over {
+            return;
+        }
+        let Some(run) = self.run.take() else { return };
+        let how = run.ended.map_or("?", |e| e.1);
+        let rows = run.recorder.rows();
+        let _ = run.recorder.finish();
+        println!("run {} ({}): {how}", run.id, run.name);
+        self.last_summary = Some(format!(
+            "{} ({}): {how}; {} rows in {}; {}",
+            run.id,
+            run.name,
+            rows,
+            run.path.display(),
+            run.acc
+        ));
+        println!("recording: {} ({rows} rows)", run.path.display());
+        if run.acc.n == 0 {
+            println!(
+                "path accuracy: not measured (no measured pose: the serial backend has no pose \
+                 sensor until the mocap bridge exists)"
+            );
+        } else {
+            println!(
+            "path accuracy (planned vs measured, {} rows): position mean {:.3} mm, max {:.3} mm, \
+             RMS {:.3} mm; orientation mean {:.3} deg, max {:.3} deg, RMS {:.3} deg",
+            run.acc.n,
+            run.acc.mean_pos_mm(),
+            run.acc.max_pos_mm,
+            run.acc.rms_pos_mm(),
+            run.acc.mean_phi_deg(),
+            run.acc.max_phi_deg,
+            run.acc.rms_phi_deg()
+        );
+        }
+        for p in &self.procs {
+            println!(
+                "process {}: restarts {}, deadline misses {} over {} cycles",
+                p.name(),
+                p.restarts,
+                p.misses(),
+                p.cycles()
+            );
+        }
+        // Keep the run for `status` as a finished one? Report only.
+        if self.opts.run.is_some() && self.exit.is_none() {
+            self.exit = Some(if how == "done" { 0 } else { EXIT_RUN_FAILED });
+        }
+    }
+
+    /// Stops every child (SIGTERM, then SIGKILL after 3 s), cleans up dead nodes' resources and
+    /// the control socket.
+    fn shutdown(&mut self) {
+        let _ = self
+            .pub_cmd
+            .send_copy(simple_command(command_kind::STOP, 0, 0));
+        if let Some(r) = &mut self.run {
+            if r.ended.is_none() {
+                r.ended = Some((Instant::now(), "interrupted"));
+            }
+        }
+        if let Some(run) = self.run.take() {
+            let _ = run.recorder.finish();
+        }
+        // The driver goes last so that it holds while the others stop.
+        let order = [
+            ProcessName::Planner,
+            ProcessName::Mocap,
+            ProcessName::Ik,
+            ProcessName::Driver,
+        ];
+        for name in order {
+            for p in self.procs.iter_mut().filter(|p| p.cfg.name == name) {
+                if let Some(c) = &mut p.child {
+                    // SAFETY: plain kill(2) on our own child.
+                    unsafe { libc::kill(c.id() as i32, libc::SIGTERM) };
+                    let end = Instant::now() + Duration::from_secs(3);
+                    loop {
+                        if let Ok(Some(_)) = c.try_wait() {
+                            break;
+                        }
+                        if Instant::now() > end {
+                            eprintln!("pcr-supervisor: {} ignores SIGTERM; killing", name.as_str());
+                            let _ = c.kill();
+                            let _ = c.wait();
+                            break;
+                        }
+                        std::thread::sleep(Duration::from_millis(10));
+                    }
+                }
+                p.child = None;
+            }
+        }
+        let _ = self.node.node.try_cleanup_dead_nodes();
+        let _ = std::fs::remove_file(&self.socket_path);
+        eprintln!("pcr-supervisor: all processes stopped");
+    }
+}
+
+/// A run is over (and its recording closed) at least 300 ms after it ended, once the motors are
+/// at rest, or 5 s after it ended if they do not come to rest.
+fn run_over(r: &Run, now: Instant) -> bool {
+    r.ended.is_some_and(|e| {
+        let after = now - e.0;
+        after >= ms(300.0) && (r.settled || after >= ms(5000.0))
+    })
+}
+
+/// Runs the supervisor until Ctrl-C / SIGTERM, `shutdown`, or the end of a `--run` program.
+/// Returns the process exit code.
+pub fn run(cfg: SupervisorConfig, opts: Options) -> Result<i32> {
+    let prefix = cfg.iceoryx2_prefix.clone();
+    let mut sup = Supervisor::new(cfg, opts)?;
+    let ws = WaitSetBuilder::new()
+        .create::<ipc::Service>()
+        .map_err(|e| anyhow!("waitset: {e:?}"))?;
+    let tick = ws
+        .attach_interval(Duration::from_millis(20))
+        .map_err(|e| anyhow!("interval: {e:?}"))?;
+    let r = pcr_nodes::run_waitset(&ws, |id| {
+        if id.has_event_from(&tick) {
+            sup.tick();
+            if sup.exit.is_some() {
+                return CallbackProgression::Stop;
+            }
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(|e| anyhow!("waitset: {e:?}"))?;
+    let code = match r {
+        WaitSetRunResult::Interrupt | WaitSetRunResult::TerminationRequest => {
+            eprintln!("pcr-supervisor: {r:?}: shutting down");
+            0
+        }
+        _ => sup.exit.unwrap_or(0),
+    };
+    sup.shutdown();
+    drop(tick);
+    drop(ws);
+    drop(sup);
+    let n = pcr_nodes::ports::remove_leftovers(&prefix);
+    if n > 0 {
+        tracing::debug!(removed = n, "removed leftover iceoryx2 files");
+    }
+    Ok(code)
+}
+
+use iceoryx2::waitset::WaitSetRunResult;
