@@ -19,6 +19,8 @@ pub mod drive;
 pub mod driver_step;
 pub mod ik;
 pub mod interpolator;
+pub mod planned;
+pub mod plant_drive;
 pub mod recorder;
 pub mod runtime;
 pub mod setpoint;
@@ -33,8 +35,10 @@ pub use ik::IkStep;
 pub use interpolator::{
     command_of_moves, moves_of, simple_command, CommandError, InterpolatorStep,
 };
+pub use planned::{MotionLimits, PlannerSource};
+pub use plant_drive::{plant_backend, PlantDrive, PlantSensor};
 pub use recorder::Recorder;
-pub use runtime::{CycleOutput, InProcessChain, InterimChain, RunError};
+pub use runtime::{CycleOutput, InProcessChain, InterimChain, RunError, SimChain, SimChainError};
 pub use setpoint::{
     paper_circle, paper_program, paper_square, InterimPathSource, Move, PlanError, SetpointSource,
 };

@@ -7,10 +7,14 @@ use crate::drive::{max_step_rate, safety_stack, FkPoseSensor, IdealDrive, PoseSe
 use crate::driver_step::DriverStep;
 use crate::ik::IkStep;
 use crate::interpolator::{CommandError, InterpolatorStep};
+use crate::planned::{MotionLimits, PlannerSource};
+use crate::plant_drive::{plant_backend, PlantDrive, PlantSensor};
 use crate::setpoint::{InterimPathSource, SetpointSource};
 use pcr_driver::{Driver, DriverError};
 use pcr_kinematics::{Pose, Robot};
 use pcr_messages::{planner_state, Command, DriverStateMsg, JointSetpoint, TaskSetpoint};
+use pcr_plant::PlantConfig;
+use pcr_robot::RobotConfig;
 
 /// What one cycle produced.
 #[derive(Debug, Clone, Copy)]
@@ -78,6 +82,46 @@ impl InterimChain {
             period_s,
         )
     }
+}
+
+/// The chain on the real parts: the planner's jerk-limited paths ([`PlannerSource`]), the
+/// simulated plant in the safety stack, its motion-capture view as the pose sensor.
+pub type SimChain = InProcessChain<PlannerSource, SafeDriver<PlantDrive>, PlantSensor>;
+
+impl SimChain {
+    /// The chain for a robot configuration and a plant configuration at `period_s`, starting at
+    /// the plant's home motor positions.
+    pub fn simulated(
+        robot_cfg: &RobotConfig,
+        plant_cfg: &PlantConfig,
+        period_s: f64,
+    ) -> Result<Self, SimChainError> {
+        let robot = Robot::new(robot_cfg).map_err(|e| SimChainError::Robot(e.to_string()))?;
+        let (drive, sensor) =
+            plant_backend(robot_cfg, plant_cfg).map_err(|e| SimChainError::Plant(e.to_string()))?;
+        let drive = safety_stack(drive, &robot, 5.0 * period_s);
+        Ok(InProcessChain::new(
+            InterpolatorStep::new(
+                PlannerSource::new(robot.clone(), MotionLimits::default()),
+                Pose::default(),
+            ),
+            IkStep::new(robot),
+            DriverStep::new(drive, sensor, period_s),
+            CorrectionStep::pass_through(),
+            period_s,
+        ))
+    }
+}
+
+/// Why the simulated chain could not be built.
+#[derive(Debug, thiserror::Error)]
+pub enum SimChainError {
+    /// The robot model.
+    #[error("robot model: {0}")]
+    Robot(String),
+    /// The plant.
+    #[error("plant: {0}")]
+    Plant(String),
 }
 
 impl<S: SetpointSource, D: Driver, P: PoseSensor> InProcessChain<S, D, P> {

@@ -54,6 +54,15 @@ pub enum PlanError {
     /// The program is empty.
     #[error("empty program")]
     Empty,
+    /// The program is valid but the robot cannot follow it (workspace, limits, singularity,
+    /// step rate); the message names the move, time, pose and the first violation.
+    #[error("move {index}: {why}")]
+    Rejected {
+        /// 0-based move index.
+        index: usize,
+        /// The first violation.
+        why: String,
+    },
 }
 
 /// A source of task-space setpoints (the interpolator's core).

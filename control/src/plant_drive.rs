@@ -1,0 +1,91 @@
+//! The simulated plant (`pcr-plant`) as the chain's drive and pose sensor.
+//!
+//! [`PlantDrive`] forwards the cycle's `write`/`read` to the plant (its elastica statics, stepper,
+//! backlash, creep and friction) and keeps the latest motion-capture sample it reports;
+//! [`PlantSensor`] hands that sample to the driver step as the measured pose. The capture sample
+//! is mapped into the robot frame with the plant's capture transform (what a registration would
+//! find; the correction step may refine it).
+
+use crate::drive::PoseSensor;
+use pcr_driver::{Driver, DriverError, DriverState, MotorCommand};
+use pcr_kinematics::Pose;
+use pcr_plant::{Frame, Plant, PlantConfig, PlantError};
+use pcr_robot::RobotConfig;
+use std::cell::Cell;
+use std::rc::Rc;
+
+/// The plant behind the driver interface.
+pub struct PlantDrive {
+    plant: Plant,
+    frame: Frame,
+    last: Rc<Cell<Option<Pose>>>,
+}
+
+/// The plant's motion-capture view, as the driver step's pose sensor.
+pub struct PlantSensor {
+    last: Rc<Cell<Option<Pose>>>,
+}
+
+/// Builds the plant drive and its sensor for a robot and a plant configuration.
+pub fn plant_backend(
+    robot: &RobotConfig,
+    cfg: &PlantConfig,
+) -> Result<(PlantDrive, PlantSensor), PlantError> {
+    let plant = Plant::new(robot, cfg)?;
+    let frame = plant.capture_model().frame;
+    let last = Rc::new(Cell::new(None));
+    Ok((
+        PlantDrive {
+            plant,
+            frame,
+            last: last.clone(),
+        },
+        PlantSensor { last },
+    ))
+}
+
+impl PlantDrive {
+    /// The plant (true state, configuration).
+    pub fn plant(&self) -> &Plant {
+        &self.plant
+    }
+
+    /// Home motor positions of the plant, steps.
+    pub fn home_steps(&self) -> [i32; 3] {
+        self.plant.home_steps()
+    }
+}
+
+impl Driver for PlantDrive {
+    fn name(&self) -> &str {
+        "plant"
+    }
+
+    fn write(&mut self, time_s: f64, period_s: f64, cmd: &MotorCommand) -> Result<(), DriverError> {
+        self.plant.write(time_s, period_s, cmd)
+    }
+
+    fn read(&mut self, time_s: f64, period_s: f64) -> Result<DriverState, DriverError> {
+        let s = self.plant.read(time_s, period_s)?;
+        for m in self.plant.drain_measurements() {
+            if let Some(p) = m.in_robot_frame(&self.frame).pose {
+                self.last.set(Some(Pose::new(p[0], p[1], p[2])));
+            }
+        }
+        Ok(s)
+    }
+
+    fn diagnostics(&self) -> Vec<(String, u64)> {
+        vec![("plant.fallbacks".into(), self.plant.fallbacks())]
+    }
+}
+
+impl PoseSensor for PlantSensor {
+    fn name(&self) -> &str {
+        "plant-capture"
+    }
+
+    fn measure(&mut self, _time_s: f64, _state: &DriverState) -> Option<Pose> {
+        self.last.take()
+    }
+}
