@@ -29,6 +29,8 @@ impl Default for MotionLimits {
     }
 }
 
+// Pieces live in a Vec built at load time; their size does not matter on the hot path.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, Copy)]
 enum Piece {
     Move { path: Path, profile: SpeedProfile },
@@ -147,10 +149,7 @@ impl SetpointSource for PlannerSource {
             let n = (d / dt).ceil().max(1.0) as usize;
             let samples = (0..=n).map(|k| {
                 let tk = (k as f64 * dt).min(*d);
-                (
-                    t0 + tk + if k == n { 0.0 } else { 0.0 },
-                    Self::piece_pose(piece, tk),
-                )
+                (t0 + tk, Self::piece_pose(piece, tk))
             });
             let mut last = f64::NEG_INFINITY;
             let samples: Vec<_> = samples

@@ -19,6 +19,9 @@ pub struct PlantDrive {
     plant: Plant,
     frame: Frame,
     last: Rc<Cell<Option<Pose>>>,
+    /// The caller's time at the first call: the plant's clock starts there (a process's clock
+    /// may be far from 0, and the plant would otherwise simulate the whole gap).
+    t0: Option<f64>,
 }
 
 /// The plant's motion-capture view, as the driver step's pose sensor.
@@ -39,6 +42,7 @@ pub fn plant_backend(
             plant,
             frame,
             last: last.clone(),
+            t0: None,
         },
         PlantSensor { last },
     ))
@@ -56,17 +60,27 @@ impl PlantDrive {
     }
 }
 
+impl PlantDrive {
+    fn plant_time(&mut self, time_s: f64) -> f64 {
+        let t0 = *self.t0.get_or_insert(time_s - self.plant.time());
+        (time_s - t0).max(0.0)
+    }
+}
+
 impl Driver for PlantDrive {
     fn name(&self) -> &str {
         "plant"
     }
 
     fn write(&mut self, time_s: f64, period_s: f64, cmd: &MotorCommand) -> Result<(), DriverError> {
-        self.plant.write(time_s, period_s, cmd)
+        let t = self.plant_time(time_s);
+        self.plant.write(t, period_s, cmd)
     }
 
     fn read(&mut self, time_s: f64, period_s: f64) -> Result<DriverState, DriverError> {
-        let s = self.plant.read(time_s, period_s)?;
+        let t = self.plant_time(time_s);
+        let mut s = self.plant.read(t, period_s)?;
+        s.time_s = time_s;
         for m in self.plant.drain_measurements() {
             if let Some(p) = m.in_robot_frame(&self.frame).pose {
                 self.last.set(Some(Pose::new(p[0], p[1], p[2])));

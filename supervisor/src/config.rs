@@ -80,8 +80,11 @@ impl ProcessName {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Backend {
-    /// Interim ideal drive (later the simulated plant).
+    /// Ideal drive with an FK pose sensor (fast, deterministic; tests).
     Sim,
+    /// The simulated plant (`pcr-plant`): elastica statics and the error effects of its
+    /// configuration, with its motion-capture view as the measured pose.
+    Plant,
     /// The firmware over a serial port.
     Serial,
 }
@@ -172,6 +175,8 @@ pub struct ProcessConfig {
     pub backend: Option<Backend>,
     /// Serial port of the serial backend.
     pub port: Option<String>,
+    /// Plant configuration of the plant backend (default: the built-in prototype plant).
+    pub plant: Option<String>,
     /// SCHED_FIFO priority 1..99 (0 = normal scheduling).
     #[serde(default)]
     pub priority: i32,
@@ -318,7 +323,7 @@ impl SupervisorConfig {
             }
             match (p.name, p.backend) {
                 (ProcessName::Driver, None) => {
-                    return Err(bad(key("backend"), "missing (sim or serial)".into()))
+                    return Err(bad(key("backend"), "missing (sim, plant or serial)".into()))
                 }
                 (ProcessName::Driver, Some(Backend::Serial)) if p.port.is_none() => {
                     return Err(bad(key("port"), "the serial backend needs a port".into()))
@@ -331,6 +336,12 @@ impl SupervisorConfig {
                     ))
                 }
                 _ => {}
+            }
+            if p.plant.is_some() && p.backend != Some(Backend::Plant) {
+                return Err(bad(
+                    key("plant"),
+                    "only the plant backend takes a plant configuration".into(),
+                ));
             }
             if p.port.is_some() && p.name != ProcessName::Driver {
                 return Err(bad(key("port"), "only the driver has a port".into()));

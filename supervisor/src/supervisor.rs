@@ -223,6 +223,12 @@ impl Supervisor {
             Some(Backend::Sim) => {
                 cmd.arg("--backend").arg("sim");
             }
+            Some(Backend::Plant) => {
+                cmd.arg("--backend").arg("plant");
+                if let Some(plant) = &p.cfg.plant {
+                    cmd.arg("--plant").arg(plant);
+                }
+            }
             Some(Backend::Serial) => {
                 cmd.arg("--backend").arg("serial");
                 cmd.arg("--port").arg(p.cfg.port.as_deref().unwrap_or(""));
@@ -371,7 +377,8 @@ impl Supervisor {
             .iter()
             .find_map(|p| p.cfg.backend)
             .map_or("?", |b| match b {
-                Backend::Sim => "pcr-supervisor, interim ideal drive (sim)",
+                Backend::Sim => "pcr-supervisor, ideal drive (sim)",
+                Backend::Plant => "pcr-supervisor, simulated plant",
                 Backend::Serial => "pcr-supervisor, serial driver",
             });
         let created = stamp.to_string();

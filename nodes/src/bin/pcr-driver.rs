@@ -10,8 +10,8 @@ use anyhow::{anyhow, Context, Result};
 use clap::{Parser, ValueEnum};
 use iceoryx2::prelude::*;
 use pcr_control::{
-    max_step_rate, safety_stack, DriverStep, FkPoseSensor, IdealDrive, NoPoseSensor, PoseSensor,
-    SafeDriver,
+    max_step_rate, plant_backend, safety_stack, DriverStep, FkPoseSensor, IdealDrive, NoPoseSensor,
+    PlantDrive, PoseSensor, SafeDriver,
 };
 use pcr_driver::{Driver, SerialConfig, SerialDriver};
 use pcr_kinematics::Robot;
@@ -19,12 +19,15 @@ use pcr_messages::{
     monotonic_ns, services as s, DriverStateMsg, Heartbeat, JointSetpoint, NodeKind,
 };
 use pcr_nodes::{chain_time_s, ports::latest, ChainNode, CommonArgs, CycleStats, ProtocolGuard};
+use pcr_plant::PlantConfig;
 use pcr_robot::RobotConfig;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 enum Backend {
-    /// Interim ideal drive with FK pose sensor (simulation).
+    /// Ideal drive with an FK pose sensor (fast, deterministic).
     Sim,
+    /// The simulated plant (pcr-plant) with its motion-capture view.
+    Plant,
     /// The stepper firmware over a serial port.
     Serial,
 }
@@ -40,6 +43,9 @@ struct Args {
     /// Serial port of the `serial` backend.
     #[arg(long, default_value = "/dev/ttyACM0")]
     port: String,
+    /// Plant configuration of the `plant` backend (default: the built-in prototype plant).
+    #[arg(long)]
+    plant: Option<String>,
 }
 
 fn main() -> std::process::ExitCode {
@@ -76,6 +82,24 @@ fn run(a: Args) -> Result<()> {
             let step = DriverStep::new(drv, FkPoseSensor::new(robot), period);
             serve(c, cn, guard, step)
         }
+        Backend::Plant => {
+            let plant_cfg = match &a.plant {
+                Some(p) => PlantConfig::load(p).with_context(|| format!("plant {p}"))?,
+                None => PlantConfig::prototype(),
+            };
+            let (mut drive, sensor) =
+                plant_backend(&robot_cfg, &plant_cfg).map_err(|e| anyhow!("plant: {e}"))?;
+            let home = drive.home_steps();
+            let start = sim_start(&cn, home)?;
+            if start != home {
+                // The physical robot keeps its pose across a driver restart: bring the new plant
+                // to the held setpoint before serving.
+                bring_to(&mut drive, start, period)?;
+            }
+            let drv = safety_stack(drive, &robot, watchdog_s);
+            let step = DriverStep::new(drv, sensor, period);
+            serve(c, cn, guard, step)
+        }
         Backend::Serial => {
             let serial = SerialDriver::open(SerialConfig::new(a.port.clone()))
                 .with_context(|| format!("serial port {}", a.port))?;
@@ -101,6 +125,25 @@ fn sim_start(cn: &ChainNode, home: [i32; 3]) -> Result<[i32; 3]> {
         std::thread::sleep(std::time::Duration::from_millis(10));
     }
     Ok(home)
+}
+
+/// Steps a fresh plant to `target` (rate-limited by the plant itself), at most 30 s.
+fn bring_to(drive: &mut PlantDrive, target: [i32; 3], period: f64) -> Result<()> {
+    let cmd = pcr_driver::MotorCommand {
+        steps: target,
+        enable: true,
+    };
+    let mut t = 0.0;
+    while t < 30.0 {
+        drive.write(t, period, &cmd)?;
+        t += period;
+        if drive.read(t, period)?.steps == target {
+            return Ok(());
+        }
+    }
+    Err(anyhow!(
+        "the plant did not reach the held setpoint {target:?}"
+    ))
 }
 
 fn serve<D: Driver, P: PoseSensor>(

@@ -5,7 +5,7 @@
 use anyhow::{anyhow, Context, Result};
 use clap::Parser;
 use iceoryx2::prelude::*;
-use pcr_control::{simple_command, InterimPathSource, InterpolatorStep};
+use pcr_control::{simple_command, InterpolatorStep, MotionLimits, PlannerSource};
 use pcr_kinematics::{Pose, Robot};
 use pcr_messages::{
     command_kind, driver_flags, monotonic_ns, planner_state, services as s, Command, Correction,
@@ -47,7 +47,10 @@ fn run(a: Args) -> Result<()> {
     let sub_state = cn.subscriber::<DriverStateMsg>(s::DRIVER_STATE)?;
     pcr_nodes::realtime::apply(c.rt_priority, c.cpu, c.mlockall);
 
-    let mut interp = InterpolatorStep::new(InterimPathSource::new(), Pose::default());
+    let mut interp = InterpolatorStep::new(
+        PlannerSource::new(robot.clone(), MotionLimits::default()),
+        Pose::default(),
+    );
     let mut commanded = false;
     let mut hold_guess = Pose::default();
     let period_ns = c.period().as_nanos() as u64;
