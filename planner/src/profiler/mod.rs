@@ -27,6 +27,8 @@ pub use limits::{Limits, State};
 pub use profile::{PositionExtrema, Profile};
 pub use step1::Step1;
 
+use std::mem::MaybeUninit;
+
 /// Maximal number of degrees of freedom of one [`Input`].
 pub const MAX_DOFS: usize = 8;
 
@@ -205,11 +207,15 @@ pub fn calculate(input: &Input) -> Result<Trajectory, ProfileError> {
         )
         .ok_or(ProfileError::NoSolution { dof: i })
     };
-    let mut st = [solve(0)?; MAX_DOFS];
-    for (i, s) in st.iter_mut().enumerate().take(n).skip(1) {
-        *s = solve(i)?;
+    // Step 1 results are large (a brake profile and the candidate shapes); they are written in
+    // place instead of copying a filled array.
+    let mut st = [MaybeUninit::<Step1>::uninit(); MAX_DOFS];
+    for (i, s) in st.iter_mut().enumerate().take(n) {
+        s.write(solve(i)?);
     }
-    let steps = &st[..n];
+    // SAFETY: the first `n` entries were initialised above (the loop returns early otherwise);
+    // `MaybeUninit<Step1>` has the layout of `Step1`.
+    let steps: &[Step1] = unsafe { std::slice::from_raw_parts(st.as_ptr().cast::<Step1>(), n) };
     let mut profiles = [Profile::new(State::default()); MAX_DOFS];
     if input.synchronization == Synchronization::None || n == 1 && input.minimum_duration.is_none()
     {
@@ -229,13 +235,31 @@ pub fn calculate(input: &Input) -> Result<Trajectory, ProfileError> {
         .iter()
         .map(|s| s.t_min())
         .fold(input.minimum_duration.unwrap_or(0.0), f64::max);
-    let t_sync =
-        step2::synchronized_duration(steps, t_lower).ok_or(ProfileError::NoSynchronization)?;
+    // The lower bound is the first synchronisation candidate and usually feasible for every
+    // DoF: build the profiles directly (one fixed-duration solve per DoF instead of a
+    // feasibility test followed by the same solve).
+    let mut all_ok = true;
     for i in 0..n {
-        profiles[i] = steps[i]
-            .profile_at(t_sync)
-            .ok_or(ProfileError::NoSolution { dof: i })?;
+        match steps[i].profile_at_checked(t_lower) {
+            Some(p) => profiles[i] = p,
+            None => {
+                all_ok = false;
+                break;
+            }
+        }
     }
+    let t_sync = if all_ok {
+        t_lower
+    } else {
+        let t_sync =
+            step2::synchronized_duration(steps, t_lower).ok_or(ProfileError::NoSynchronization)?;
+        for i in 0..n {
+            profiles[i] = steps[i]
+                .profile_at(t_sync)
+                .ok_or(ProfileError::NoSolution { dof: i })?;
+        }
+        t_sync
+    };
     if input.synchronization == Synchronization::Phase {
         phase_synchronize(input, steps, t_sync, &mut profiles);
     }

@@ -199,6 +199,17 @@ impl Step1 {
             || self.feasible_main(td)
     }
 
+    /// [`Step1::profile_at`] if `t` is feasible ([`Step1::is_feasible`]), None otherwise: one
+    /// fixed-duration solve instead of a feasibility test followed by the same solve.
+    pub fn profile_at_checked(&self, t: f64) -> Option<Profile> {
+        let td = t - self.brake_duration();
+        let tol = 1e-12 * td.abs().max(1.0);
+        if td < self.cand[0].duration() - tol {
+            return None;
+        }
+        self.profile_at(t)
+    }
+
     /// The time-optimal profile (brake included).
     pub fn optimal_profile(&self) -> Profile {
         self.with_brake(&self.cand[0].profile(self.start, self.problem.lim.jmax))
