@@ -41,21 +41,31 @@ impl Poly {
     }
 
     /// Sum.
+    #[inline]
     pub fn add(&self, o: &Poly) -> Poly {
+        // Fixed-length loops (entries above `deg` are zero): unrolled and vectorised, and the
+        // same result as looping to the degree.
         let mut r = *self;
         r.deg = self.deg.max(o.deg);
-        for i in 0..=o.deg {
-            r.c[i] += o.c[i];
+        for (rc, oc) in r.c.iter_mut().zip(&o.c) {
+            *rc += oc;
         }
         r
     }
 
     /// Difference.
+    #[inline]
     pub fn sub(&self, o: &Poly) -> Poly {
-        self.add(&o.scale(-1.0))
+        let mut r = *self;
+        r.deg = self.deg.max(o.deg);
+        for (rc, oc) in r.c.iter_mut().zip(&o.c) {
+            *rc -= oc;
+        }
+        r
     }
 
     /// Product with a scalar.
+    #[inline]
     pub fn scale(&self, k: f64) -> Poly {
         let mut r = *self;
         for v in r.c.iter_mut() {
@@ -65,6 +75,7 @@ impl Poly {
     }
 
     /// Sum with a scalar.
+    #[inline]
     pub fn add_const(&self, k: f64) -> Poly {
         let mut r = *self;
         r.c[0] += k;
@@ -91,6 +102,7 @@ impl Poly {
     }
 
     /// Value at `x` (Horner).
+    #[inline]
     pub fn eval(&self, x: f64) -> f64 {
         let mut acc = 0.0;
         for i in (0..=self.deg).rev() {
@@ -135,6 +147,7 @@ impl Poly {
         }
         match p.deg {
             0 => 0,
+            2 => quadratic_roots_in(&p, lo, hi, out),
             1 => {
                 let r = -p.c[0] / p.c[1];
                 if r >= lo && r <= hi {
@@ -152,16 +165,6 @@ impl Poly {
                 pts[1..=nc].copy_from_slice(&crit[..nc]);
                 pts[nc + 1] = hi;
                 let npts = nc + 2;
-                // "Negligible" value at x: the rounding-error scale of evaluating p there.
-                let tiny_at = |x: f64| {
-                    let mut mag = 0.0f64;
-                    let mut xp = 1.0;
-                    for i in 0..=p.deg {
-                        mag += (p.c[i] * xp).abs();
-                        xp *= x.abs();
-                    }
-                    mag * 1e-13
-                };
                 let xs = lo.abs().max(hi.abs()).max(1e-300);
                 let mut n = 0;
                 let mut push = |r: f64, n: &mut usize| {
@@ -180,7 +183,7 @@ impl Poly {
                         push(a, &mut n);
                         continue;
                     }
-                    if k > 0 && fa.abs() <= tiny_at(a) {
+                    if k > 0 && fa.abs() <= tiny_at(&p, a) {
                         // Possibly a double root at a critical point; keep looking for a
                         // sign change in the piece as well.
                         push(a, &mut n);
@@ -197,6 +200,54 @@ impl Poly {
             }
         }
     }
+}
+
+/// Rounding-error scale of evaluating `p` at `x`: below it a value is negligible.
+fn tiny_at(p: &Poly, x: f64) -> f64 {
+    let mut mag = 0.0f64;
+    let mut xp = 1.0;
+    for i in 0..=p.deg {
+        mag += (p.c[i] * xp).abs();
+        xp *= x.abs();
+    }
+    mag * 1e-13
+}
+
+/// [`Poly::roots_in`] for an exact quadratic (`c[2] != 0`), in closed form: the numerically
+/// stable pair `q = -(b + sign(b) sqrt(b^2 - 4ac)) / 2`, roots `q / a` and `c / q`. As the
+/// general routine, the vertex is reported as well when the value there is negligible (a
+/// double root, possibly with a slightly negative discriminant).
+fn quadratic_roots_in(p: &Poly, lo: f64, hi: f64, out: &mut [f64; ROOTS_CAP]) -> usize {
+    let (c, b, a) = (p.c[0], p.c[1], p.c[2]);
+    let mut cand = [f64::NAN; 3];
+    let disc = b * b - 4.0 * a * c;
+    if disc >= 0.0 {
+        let q = -0.5 * (b + disc.sqrt().copysign(b));
+        if q != 0.0 {
+            cand[0] = q / a;
+            cand[1] = c / q;
+        } else {
+            cand[0] = 0.0;
+        }
+    }
+    let xv = -b / (2.0 * a);
+    if xv > lo && xv < hi && p.eval(xv).abs() <= tiny_at(p, xv) {
+        cand[2] = xv;
+    }
+    cand.sort_by(f64::total_cmp);
+    let xs = lo.abs().max(hi.abs()).max(1e-300);
+    let mut n = 0;
+    for r in cand {
+        if !(r >= lo && r <= hi) {
+            continue;
+        }
+        if n > 0 && (r - out[n - 1]).abs() <= 1e-14 * xs {
+            continue;
+        }
+        out[n] = r;
+        n += 1;
+    }
+    n
 }
 
 /// Safeguarded Newton iteration on a bracket `[a, b]` where `p(a)` has the sign of `fa` and
@@ -264,6 +315,26 @@ mod tests {
         let n = p.roots_in(0.0, 2.0, &mut out);
         assert_eq!(n, 1);
         assert!((out[0] - 1.0).abs() < 1e-7);
+    }
+
+    #[test]
+    fn quadratic_closed_form() {
+        let mut out = [0.0; ROOTS_CAP];
+        // Widely separated roots (cancellation-prone in the textbook formula).
+        let p = from_roots(&[1e-9, 3e5]);
+        let n = p.roots_in(-1.0, 1e6, &mut out);
+        assert_eq!(n, 2);
+        assert!((out[0] - 1e-9).abs() < 1e-22 && (out[1] - 3e5).abs() < 1e-9);
+        // Range filter.
+        assert_eq!(p.roots_in(1.0, 2.0, &mut out), 0);
+        // Exact and rounded double roots are reported once.
+        let p = from_roots(&[0.1, 0.1]);
+        assert_eq!(p.roots_in(0.0, 1.0, &mut out), 1);
+        assert!((out[0] - 0.1).abs() < 1e-7);
+        let mut q = from_roots(&[0.5, 0.5]);
+        q.c[0] += 1e-17;
+        assert_eq!(q.roots_in(0.0, 1.0, &mut out), 1);
+        assert!((out[0] - 0.5).abs() < 1e-7);
     }
 
     #[test]
