@@ -196,6 +196,23 @@ impl Trajectory {
 
 /// Computes the time-optimal (synchronised) trajectory for `input`.
 pub fn calculate(input: &Input) -> Result<Trajectory, ProfileError> {
+    // The trajectory (several kB) is filled in place in the return value rather than
+    // assembled and moved.
+    let mut res = Ok(Trajectory {
+        dofs: input.dofs,
+        duration: 0.0,
+        profiles: [Profile::new(State::default()); MAX_DOFS],
+    });
+    if let Ok(traj) = &mut res {
+        if let Err(e) = calculate_into(input, traj) {
+            res = Err(e);
+        }
+    }
+    res
+}
+
+/// [`calculate`] into `traj` (whose `dofs` is set, profiles overwritten).
+fn calculate_into(input: &Input, traj: &mut Trajectory) -> Result<(), ProfileError> {
     input.validate()?;
     let n = input.dofs;
     let solve = |i: usize| {
@@ -216,7 +233,7 @@ pub fn calculate(input: &Input) -> Result<Trajectory, ProfileError> {
     // SAFETY: the first `n` entries were initialised above (the loop returns early otherwise);
     // `MaybeUninit<Step1>` has the layout of `Step1`.
     let steps: &[Step1] = unsafe { std::slice::from_raw_parts(st.as_ptr().cast::<Step1>(), n) };
-    let mut profiles = [Profile::new(State::default()); MAX_DOFS];
+    let profiles = &mut traj.profiles;
     if input.synchronization == Synchronization::None || n == 1 && input.minimum_duration.is_none()
     {
         // As ruckig: with no synchronisation the minimum duration only extends the total.
@@ -225,11 +242,8 @@ pub fn calculate(input: &Input) -> Result<Trajectory, ProfileError> {
             profiles[i] = steps[i].optimal_profile();
             duration = duration.max(profiles[i].duration());
         }
-        return Ok(Trajectory {
-            dofs: n,
-            duration,
-            profiles,
-        });
+        traj.duration = duration;
+        return Ok(());
     }
     let t_lower = steps
         .iter()
@@ -238,36 +252,24 @@ pub fn calculate(input: &Input) -> Result<Trajectory, ProfileError> {
     // The lower bound is the first synchronisation candidate and usually feasible for every
     // DoF: build the profiles directly (one fixed-duration solve per DoF instead of a
     // feasibility test followed by the same solve).
-    let mut all_ok = true;
-    for i in 0..n {
-        match steps[i].profile_at_checked(t_lower) {
-            Some(p) => profiles[i] = p,
-            None => {
-                all_ok = false;
-                break;
-            }
-        }
-    }
+    let all_ok = (0..n).all(|i| steps[i].profile_at_checked_into(t_lower, &mut profiles[i]));
     let t_sync = if all_ok {
         t_lower
     } else {
         let t_sync =
             step2::synchronized_duration(steps, t_lower).ok_or(ProfileError::NoSynchronization)?;
         for i in 0..n {
-            profiles[i] = steps[i]
-                .profile_at(t_sync)
-                .ok_or(ProfileError::NoSolution { dof: i })?;
+            if !steps[i].profile_at_into(t_sync, &mut profiles[i]) {
+                return Err(ProfileError::NoSolution { dof: i });
+            }
         }
         t_sync
     };
     if input.synchronization == Synchronization::Phase {
-        phase_synchronize(input, steps, t_sync, &mut profiles);
+        phase_synchronize(input, steps, t_sync, &mut profiles[..]);
     }
-    Ok(Trajectory {
-        dofs: n,
-        duration: t_sync,
-        profiles,
-    })
+    traj.duration = t_sync;
+    Ok(())
 }
 
 /// Replaces the profiles by scaled copies of the limiting DoF's profile if the motion is

@@ -66,6 +66,17 @@ impl Profile {
         true
     }
 
+    /// Makes this profile a copy of `other`, copying only the used entries (cheaper than an
+    /// assignment of the whole fixed-capacity arrays; entries past the length are never read).
+    pub fn copy_from(&mut self, other: &Profile) {
+        let n = other.n;
+        self.n = n;
+        self.t[..n].copy_from_slice(&other.t[..n]);
+        self.j[..n].copy_from_slice(&other.j[..n]);
+        self.s[..=n].copy_from_slice(&other.s[..=n]);
+        self.t0[..=n].copy_from_slice(&other.t0[..=n]);
+    }
+
     /// Appends all segments of `other` (whose start state is assumed to equal this end state).
     pub fn append(&mut self, other: &Profile) -> bool {
         (0..other.n).all(|i| self.push(other.t[i], other.j[i]))

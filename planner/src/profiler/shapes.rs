@@ -126,13 +126,18 @@ impl Shape {
 
     /// The profile of this shape from `start` for jerk limit `jmax`.
     pub fn profile(&self, start: State, jmax: f64) -> Profile {
+        let mut p = Profile::new(start);
+        self.push_onto(&mut p, jmax);
+        p
+    }
+
+    /// Appends the phases of this shape to `p` (from its end state) for jerk limit `jmax`.
+    pub fn push_onto(&self, p: &mut Profile, jmax: f64) {
         let j = self.dir * jmax;
         let jerks = [j, 0.0, -j, 0.0, -j, 0.0, j];
-        let mut p = Profile::new(start);
         for (t, jk) in self.t.iter().zip(jerks) {
             p.push(*t, jk);
         }
-        p
     }
 }
 

@@ -202,12 +202,19 @@ impl Step1 {
     /// [`Step1::profile_at`] if `t` is feasible ([`Step1::is_feasible`]), None otherwise: one
     /// fixed-duration solve instead of a feasibility test followed by the same solve.
     pub fn profile_at_checked(&self, t: f64) -> Option<Profile> {
+        let mut p = Profile::new(State::default());
+        self.profile_at_checked_into(t, &mut p).then_some(p)
+    }
+
+    /// [`Step1::profile_at_checked`] written into `out` (no copies of whole profiles); returns
+    /// false (and leaves `out` unspecified) if `t` is not feasible.
+    pub fn profile_at_checked_into(&self, t: f64, out: &mut Profile) -> bool {
         let td = t - self.brake_duration();
         let tol = 1e-12 * td.abs().max(1.0);
         if td < self.cand[0].duration() - tol {
-            return None;
+            return false;
         }
-        self.profile_at(t)
+        self.profile_at_into(t, out)
     }
 
     /// The time-optimal profile (brake included).
@@ -226,29 +233,44 @@ impl Step1 {
     /// inside, the convex combination of the position-maximal and position-minimal shapes of
     /// that duration that lands exactly on the target.
     pub fn profile_at(&self, t: f64) -> Option<Profile> {
+        let mut p = Profile::new(State::default());
+        self.profile_at_into(t, &mut p).then_some(p)
+    }
+
+    /// [`Step1::profile_at`] written into `out`; returns false (and leaves `out` unspecified)
+    /// if `t` is not feasible.
+    pub fn profile_at_into(&self, t: f64, out: &mut Profile) -> bool {
         let td = t - self.brake_duration();
         let tol = 1e-12 * td.abs().max(1.0);
         let jmax = self.problem.lim.jmax;
         for c in &self.cand[..self.n_cand] {
             if (c.duration() - td).abs() <= tol {
-                return Some(self.with_brake(&c.profile(self.start, jmax)));
+                // The brake ends at `start`: the phases continue from its end state.
+                out.copy_from(&self.brake);
+                c.push_onto(out, jmax);
+                return true;
             }
         }
-        let (hi, shi) = self.extreme_at(1.0, td)?;
-        let (lo, slo) = self.extreme_at(-1.0, td)?;
+        let Some((hi, shi)) = self.extreme_at(1.0, td) else {
+            return false;
+        };
+        let Some((lo, slo)) = self.extreme_at(-1.0, td) else {
+            return false;
+        };
         let g = self.goal_value();
         let tolg = self.goal_tol();
         if g > hi + tolg || g < lo - tolg {
-            return None;
+            return false;
         }
-        let phi = shi.profile(self.start, jmax);
-        let plo = slo.profile(self.start, jmax);
-        let main = if hi - lo <= 1e-14 * g.abs().max(1.0) {
-            phi
+        out.copy_from(&self.brake);
+        if hi - lo <= 1e-14 * g.abs().max(1.0) {
+            shi.push_onto(out, jmax);
         } else {
+            let phi = shi.profile(self.start, jmax);
+            let plo = slo.profile(self.start, jmax);
             let lambda = ((g - lo) / (hi - lo)).clamp(0.0, 1.0);
-            Profile::blend(&phi, &plo, lambda)
-        };
-        Some(self.with_brake(&main))
+            out.append(&Profile::blend(&phi, &plo, lambda));
+        }
+        true
     }
 }
