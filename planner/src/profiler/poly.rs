@@ -4,8 +4,10 @@
 //! parameter (see `shapes.rs`) and isolating all of its real roots in the parameter's admissible
 //! interval. No allocation: coefficients live in a fixed array.
 
-/// Maximal degree a [`Poly`] can hold.
-pub const MAX_DEGREE: usize = 10;
+/// Maximal degree a [`Poly`] can hold. The largest equation is the homogenised final position
+/// of the no-plateau shape (`shapes.rs`): phase durations of degree 2 times the parameter, state
+/// `(u^3 p, u^2 v, u a)`, so degree 6; every intermediate product stays within it.
+pub const MAX_DEGREE: usize = 6;
 
 /// Capacity of a root list: simple roots plus (near-)double roots reported at critical points.
 pub const ROOTS_CAP: usize = 2 * MAX_DEGREE + 2;

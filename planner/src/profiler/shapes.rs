@@ -355,14 +355,13 @@ pub fn solve_case(pr: &Problem, case: Case, goal: Goal, out: &mut impl FnMut(Sha
                 if ti.c.iter().all(|c| *c == 0.0) {
                     continue;
                 }
-                let t2 = ti.mul(ti);
-                let t3 = t2.mul(ti);
-                p = p
-                    .add(&v.mul(ti))
-                    .add(&a.mul(&t2).scale(0.5))
-                    .add(&t3.scale(jk / 6.0));
-                v = v.add(&a.mul(ti)).add(&t2.scale(jk / 2.0));
-                a = a.add(&ti.scale(jk));
+                // Horner form in the phase duration: three products per phase.
+                // p += T (v + T (a/2 + j T/6)), v += T (a + j T/2), a += j T.
+                let jt = ti.scale(jk);
+                let inner = a.scale(0.5).add(&jt.scale(1.0 / 6.0));
+                p = p.add(&ti.mul(&v.add(&ti.mul(&inner))));
+                v = v.add(&ti.mul(&a.add(&jt.scale(0.5))));
+                a = a.add(&jt);
             }
             p.sub(&u.mul(&u).mul(&u).scale(pr.d))
         }
