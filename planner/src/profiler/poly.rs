@@ -150,6 +150,7 @@ impl Poly {
         match p.deg {
             0 => 0,
             2 => quadratic_roots_in(&p, lo, hi, out),
+            3 => cubic_roots_in(&p, lo, hi, out),
             1 => {
                 let r = -p.c[0] / p.c[1];
                 if r >= lo && r <= hi {
@@ -236,11 +237,17 @@ fn quadratic_roots_in(p: &Poly, lo: f64, hi: f64, out: &mut [f64; ROOTS_CAP]) ->
     if xv > lo && xv < hi && p.eval(xv).abs() <= tiny_at(p, xv) {
         cand[2] = xv;
     }
-    cand.sort_by(f64::total_cmp);
+    collect_roots(&mut cand, lo, hi, out)
+}
+
+/// Writes the finite candidates of `cand` within `[lo, hi]` into `out`, ascending, dropping
+/// near-duplicates (as the general routine); returns their count.
+fn collect_roots(cand: &mut [f64], lo: f64, hi: f64, out: &mut [f64; ROOTS_CAP]) -> usize {
+    cand.sort_unstable_by(f64::total_cmp);
     let xs = lo.abs().max(hi.abs()).max(1e-300);
     let mut n = 0;
-    for r in cand {
-        if !(r >= lo && r <= hi) {
+    for &r in cand.iter() {
+        if !(lo..=hi).contains(&r) {
             continue;
         }
         if n > 0 && (r - out[n - 1]).abs() <= 1e-14 * xs {
@@ -250,6 +257,69 @@ fn quadratic_roots_in(p: &Poly, lo: f64, hi: f64, out: &mut [f64; ROOTS_CAP]) ->
         n += 1;
     }
     n
+}
+
+/// Two Newton steps on `p` from `x`, each kept only if it does not increase `|p|`.
+#[inline]
+fn newton_polish(p: &Poly, dp: &Poly, mut x: f64) -> f64 {
+    let mut fx = p.eval(x);
+    for _ in 0..2 {
+        let d = dp.eval(x);
+        if fx == 0.0 || d == 0.0 {
+            break;
+        }
+        let y = x - fx / d;
+        let fy = p.eval(y);
+        if fy.is_nan() || fy.abs() > fx.abs() {
+            break;
+        }
+        (x, fx) = (y, fy);
+    }
+    x
+}
+
+/// [`Poly::roots_in`] for an exact cubic (`c[3] != 0`), in closed form (Cardano with the
+/// cancellation-free pair for one real root, the trigonometric form for three), each root
+/// polished by Newton steps on `p`. As the general routine, a critical point is reported as
+/// well when the value there is negligible (a double root the closed form may split or lose).
+fn cubic_roots_in(p: &Poly, lo: f64, hi: f64, out: &mut [f64; ROOTS_CAP]) -> usize {
+    let a = p.c[3];
+    let (b, c, d) = (p.c[2] / a, p.c[1] / a, p.c[0] / a);
+    // x = y - b/3: y^3 + 3 q y - 2 r = 0.
+    let shift = b / 3.0;
+    let q = (3.0 * c - b * b) / 9.0;
+    let r = (9.0 * b * c - 27.0 * d - 2.0 * b * b * b) / 54.0;
+    let disc = q * q * q + r * r;
+    let dp = p.deriv();
+    let mut cand = [f64::NAN; 5];
+    if disc > 0.0 {
+        let s1 = (r + disc.sqrt().copysign(r)).cbrt();
+        let y = if s1 != 0.0 { s1 - q / s1 } else { 0.0 };
+        cand[0] = newton_polish(p, &dp, y - shift);
+    } else {
+        // q <= 0 here.
+        let m = (-q).sqrt();
+        let cos_arg = if m > 0.0 {
+            (r / (m * m * m)).clamp(-1.0, 1.0)
+        } else {
+            0.0
+        };
+        let th = cos_arg.acos() / 3.0;
+        let k = std::f64::consts::TAU / 3.0;
+        for (i, cv) in cand.iter_mut().take(3).enumerate() {
+            let y = 2.0 * m * (th + k * i as f64).cos();
+            *cv = newton_polish(p, &dp, y - shift);
+        }
+    }
+    // Critical points (roots of the derivative) with a negligible value.
+    let mut crit = [0.0; ROOTS_CAP];
+    let nc = quadratic_roots_in(&dp, lo, hi, &mut crit);
+    for (i, &x) in crit[..nc].iter().enumerate() {
+        if p.eval(x).abs() <= tiny_at(p, x) {
+            cand[3 + i] = x;
+        }
+    }
+    collect_roots(&mut cand, lo, hi, out)
 }
 
 /// Safeguarded Newton iteration on a bracket `[a, b]` where `p(a)` has the sign of `fa` and
@@ -337,6 +407,33 @@ mod tests {
         q.c[0] += 1e-17;
         assert_eq!(q.roots_in(0.0, 1.0, &mut out), 1);
         assert!((out[0] - 0.5).abs() < 1e-7);
+    }
+
+    #[test]
+    fn cubic_closed_form() {
+        let mut out = [0.0; ROOTS_CAP];
+        for rs in [
+            [-2.0, 0.5, 3.0],
+            [1e-6, 2.0, 2.000001],
+            [-1e3, 0.1, 7.0],
+            [0.3, 0.3, 0.3],
+        ] {
+            let p = from_roots(&rs).scale(-2.5);
+            let n = p.roots_in(-1e4, 1e4, &mut out);
+            // Roots, plus critical points where the value is negligible (close roots).
+            assert!((1..=5).contains(&n), "{rs:?}: {n}");
+            for r in rs {
+                let near = out[..n]
+                    .iter()
+                    .any(|x| (x - r).abs() <= 1e-5 * r.abs().max(1.0));
+                assert!(near, "{rs:?}: {:?}", &out[..n]);
+            }
+        }
+        // One real root.
+        let p = Poly::linear(1.0, 0.0).add(&Poly::x().mul(&Poly::x()).mul(&Poly::x()));
+        assert_eq!(p.roots_in(-5.0, 5.0, &mut out), 1);
+        assert!((out[0] + 1.0).abs() < 1e-14);
+        assert_eq!(p.roots_in(0.0, 5.0, &mut out), 0);
     }
 
     #[test]
