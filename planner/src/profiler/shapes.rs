@@ -489,8 +489,14 @@ fn solve_vmax(pr: &Problem, goal: Goal, tol: &Tol) -> Option<Shape> {
     }
     match goal {
         Goal::Position => {
-            let prof = Shape { t, dir: 1.0 }.profile(State::new(0.0, v0, a0), j);
-            t[3] = (pr.d - prof.end().p) / vmax;
+            // End position of the shape without cruise (same integration as a profile).
+            let mut e = State::new(0.0, v0, a0);
+            for (ti, jk) in t.iter().zip(pr.jerks()) {
+                if *ti > 0.0 {
+                    e = e.integrate(*ti, jk);
+                }
+            }
+            t[3] = (pr.d - e.p) / vmax;
         }
         Goal::Duration(td) => {
             t[3] = td - t.iter().sum::<f64>();
