@@ -162,7 +162,8 @@ impl Poly {
             }
             _ => {
                 let mut crit = [0.0; ROOTS_CAP];
-                let nc = p.deriv().roots_in(lo, hi, &mut crit);
+                let dp = p.deriv();
+                let nc = dp.roots_in(lo, hi, &mut crit);
                 let mut pts = [0.0; ROOTS_CAP + 2];
                 pts[0] = lo;
                 pts[1..=nc].copy_from_slice(&crit[..nc]);
@@ -192,7 +193,7 @@ impl Poly {
                         push(a, &mut n);
                     }
                     if fa.signum() != fb.signum() && fb != 0.0 {
-                        push(bisect(&p, a, b, fa), &mut n);
+                        push(bisect(&p, &dp, a, b, fa), &mut n);
                     }
                 }
                 let fh = p.eval(hi);
@@ -325,8 +326,7 @@ fn cubic_roots_in(p: &Poly, lo: f64, hi: f64, out: &mut [f64; ROOTS_CAP]) -> usi
 /// Safeguarded Newton iteration on a bracket `[a, b]` where `p(a)` has the sign of `fa` and
 /// `p(b)` the opposite sign: Newton steps while they stay inside the shrinking bracket, bisection
 /// otherwise; converges to (nearly) adjacent floating point numbers.
-fn bisect(p: &Poly, mut a: f64, mut b: f64, fa: f64) -> f64 {
-    let dp = p.deriv();
+fn bisect(p: &Poly, dp: &Poly, mut a: f64, mut b: f64, fa: f64) -> f64 {
     let sa = fa.signum();
     let mut x = 0.5 * (a + b);
     for _ in 0..100 {

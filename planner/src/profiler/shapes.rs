@@ -355,6 +355,12 @@ pub fn solve_case(pr: &Problem, case: Case, goal: Goal, out: &mut impl FnMut(Sha
                 if ti.c.iter().all(|c| *c == 0.0) {
                     continue;
                 }
+                if jk == 0.0 {
+                    // Plateau: p += T (v + T a/2), v += T a.
+                    p = p.add(&ti.mul(&v.add(&ti.mul(&a.scale(0.5)))));
+                    v = v.add(&ti.mul(&a));
+                    continue;
+                }
                 // Horner form in the phase duration: three products per phase.
                 // p += T (v + T (a/2 + j T/6)), v += T (a + j T/2), a += j T.
                 let jt = ti.scale(jk);

@@ -15,6 +15,7 @@ use super::profile::Profile;
 use super::shapes::{self, Goal, Problem, Shape};
 use super::velocity;
 use super::ControlInterface;
+use std::mem::MaybeUninit;
 
 /// Maximal number of distinct candidate durations kept.
 pub const MAX_CANDIDATES: usize = 24;
@@ -59,14 +60,12 @@ impl Step1 {
             }; MAX_CANDIDATES],
             n_cand: 0,
         };
-        let mut all = [Shape {
-            t: [0.0; 7],
-            dir: 1.0,
-        }; 64];
+        // Scratch list of all solutions; left uninitialised (4 kB) and written as they come.
+        let mut all = [MaybeUninit::<Shape>::uninit(); 64];
         let mut n = 0;
         let mut collect = |sh: Shape| {
             if n < all.len() {
-                all[n] = sh;
+                all[n].write(sh);
                 n += 1;
             }
         };
@@ -86,7 +85,10 @@ impl Step1 {
         if n == 0 {
             return None;
         }
-        let all = &mut all[..n];
+        // SAFETY: the first `n` entries were written by `collect`; `MaybeUninit<Shape>` has the
+        // layout of `Shape`.
+        let all: &mut [Shape] =
+            unsafe { std::slice::from_raw_parts_mut(all.as_mut_ptr().cast::<Shape>(), n) };
         all.sort_by(|a, b| a.duration().total_cmp(&b.duration()));
         for sh in all.iter() {
             let d = sh.duration();
