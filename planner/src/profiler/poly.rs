@@ -103,6 +103,27 @@ impl Poly {
         r
     }
 
+    /// Product with `o` for `self` of degree at most 2 (the phase durations): fixed-length,
+    /// branch-free loops with the same operations in the same order as [`Poly::mul`] (the extra
+    /// terms are exact zeros), so the same result.
+    #[inline]
+    pub fn mul_low(&self, o: &Poly) -> Poly {
+        debug_assert!(self.deg <= 2 && self.deg + o.deg <= MAX_DEGREE);
+        let mut r = Poly::constant(0.0);
+        r.deg = (self.deg + o.deg).min(MAX_DEGREE);
+        let (t0, t1, t2) = (self.c[0], self.c[1], self.c[2]);
+        for k in 0..=MAX_DEGREE {
+            r.c[k] = t0 * o.c[k];
+        }
+        for k in 1..=MAX_DEGREE {
+            r.c[k] += t1 * o.c[k - 1];
+        }
+        for k in 2..=MAX_DEGREE {
+            r.c[k] += t2 * o.c[k - 2];
+        }
+        r
+    }
+
     /// Value at `x` (Horner).
     #[inline]
     pub fn eval(&self, x: f64) -> f64 {

@@ -357,19 +357,19 @@ pub fn solve_case(pr: &Problem, case: Case, goal: Goal, out: &mut impl FnMut(Sha
                 }
                 if jk == 0.0 {
                     // Plateau: p += T (v + T a/2), v += T a.
-                    p = p.add(&ti.mul(&v.add(&ti.mul(&a.scale(0.5)))));
-                    v = v.add(&ti.mul(&a));
+                    p = p.add(&ti.mul_low(&v.add(&ti.mul_low(&a.scale(0.5)))));
+                    v = v.add(&ti.mul_low(&a));
                     continue;
                 }
                 // Horner form in the phase duration: three products per phase.
                 // p += T (v + T (a/2 + j T/6)), v += T (a + j T/2), a += j T.
                 let jt = ti.scale(jk);
                 let inner = a.scale(0.5).add(&jt.scale(1.0 / 6.0));
-                p = p.add(&ti.mul(&v.add(&ti.mul(&inner))));
-                v = v.add(&ti.mul(&a.add(&jt.scale(0.5))));
+                p = p.add(&ti.mul_low(&v.add(&ti.mul_low(&inner))));
+                v = v.add(&ti.mul_low(&a.add(&jt.scale(0.5))));
                 a = a.add(&jt);
             }
-            p.sub(&u.mul(&u).mul(&u).scale(pr.d))
+            p.sub(&u.mul_low(&u).mul_low(&u).scale(pr.d))
         }
         Goal::Duration(td) => {
             let mut tt = zero();
