@@ -156,6 +156,33 @@ impl Poly {
         r
     }
 
+    /// True if `|p|` is provably bounded away from zero on `[lo, hi]` (so there is no root and
+    /// no negligible value anywhere there): with the Taylor coefficients `b_k` at the midpoint
+    /// `m` and the half-width `r`, `|p(x) - b_0| <= sum_{k>=1} |b_k| r^k`. The margin covers the
+    /// rounding of the shift and the "negligible" scale of [`Poly::roots_in`] generously.
+    fn excludes_roots(&self, lo: f64, hi: f64) -> bool {
+        let d = self.deg;
+        let m = 0.5 * (lo + hi);
+        let r = 0.5 * (hi - lo);
+        let mut b = self.c;
+        for i in 0..d {
+            for k in (i..d).rev() {
+                b[k] += m * b[k + 1];
+            }
+        }
+        let (mut bound, mut mag, mut rk, mut xk) = (0.0f64, 0.0f64, 1.0f64, 1.0f64);
+        let xm = m.abs() + r;
+        for (k, (bk, ck)) in b.iter().zip(&self.c).enumerate().take(d + 1) {
+            if k > 0 {
+                bound += bk.abs() * rk;
+            }
+            mag += ck.abs() * xk;
+            rk *= r;
+            xk *= xm;
+        }
+        b[0].abs() > bound + 1e-10 * mag
+    }
+
     /// All real roots in `[lo, hi]`, ascending, written into `out`; returns their count.
     ///
     /// The interval is split at the roots of the derivative (found recursively) into pieces on
@@ -181,6 +208,7 @@ impl Poly {
                     0
                 }
             }
+            _ if p.excludes_roots(lo, hi) => 0,
             _ => {
                 let mut crit = [0.0; ROOTS_CAP];
                 let dp = p.deriv();
