@@ -131,6 +131,22 @@ impl Shape {
         p
     }
 
+    /// The phases of positive duration as `(durations, jerks, count)` (the segments a profile
+    /// of this shape has) for jerk limit `jmax`.
+    pub fn segments(&self, jmax: f64) -> ([f64; 7], [f64; 7], usize) {
+        let j = self.dir * jmax;
+        let jerks = [j, 0.0, -j, 0.0, -j, 0.0, j];
+        let (mut t, mut jk, mut n) = ([0.0; 7], [0.0; 7], 0);
+        for (ti, ji) in self.t.iter().zip(jerks) {
+            if *ti > 0.0 {
+                t[n] = *ti;
+                jk[n] = ji;
+                n += 1;
+            }
+        }
+        (t, jk, n)
+    }
+
     /// Appends the phases of this shape to `p` (from its end state) for jerk limit `jmax`.
     pub fn push_onto(&self, p: &mut Profile, jmax: f64) {
         let j = self.dir * jmax;

@@ -268,10 +268,12 @@ impl Step1 {
         if hi - lo <= 1e-14 * g.abs().max(1.0) {
             shi.push_onto(out, jmax);
         } else {
-            let phi = shi.profile(self.start, jmax);
-            let plo = slo.profile(self.start, jmax);
+            // The blend of the two extremal shapes, pushed directly after the brake (the same
+            // segments as `Profile::blend` of their profiles).
+            let (ta, ja, na) = shi.segments(jmax);
+            let (tb, jb, nb) = slo.segments(jmax);
             let lambda = ((g - lo) / (hi - lo)).clamp(0.0, 1.0);
-            out.append(&Profile::blend(&phi, &plo, lambda));
+            out.push_blend((&ta[..na], &ja[..na]), (&tb[..nb], &jb[..nb]), lambda);
         }
         true
     }
