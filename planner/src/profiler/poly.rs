@@ -164,9 +164,11 @@ impl Poly {
         let d = self.deg;
         let m = 0.5 * (lo + hi);
         let r = 0.5 * (hi - lo);
+        // Taylor shift by repeated synthetic division, over the full (fixed) length so that it
+        // is unrolled into registers; the coefficients above the degree are zero and stay so.
         let mut b = self.c;
-        for i in 0..d {
-            for k in (i..d).rev() {
+        for i in 0..MAX_DEGREE {
+            for k in (i..MAX_DEGREE).rev() {
                 b[k] += m * b[k + 1];
             }
         }
