@@ -127,11 +127,25 @@ impl Poly {
     /// Value at `x` (Horner).
     #[inline]
     pub fn eval(&self, x: f64) -> f64 {
-        let mut acc = 0.0;
-        for i in (0..=self.deg).rev() {
-            acc = acc * x + self.c[i];
+        // Unrolled per degree (no loop over coefficients in memory); the same operations in the
+        // same order as the loop below.
+        let c = &self.c;
+        match self.deg {
+            0 => c[0],
+            1 => c[1] * x + c[0],
+            2 => (c[2] * x + c[1]) * x + c[0],
+            3 => ((c[3] * x + c[2]) * x + c[1]) * x + c[0],
+            4 => (((c[4] * x + c[3]) * x + c[2]) * x + c[1]) * x + c[0],
+            5 => ((((c[5] * x + c[4]) * x + c[3]) * x + c[2]) * x + c[1]) * x + c[0],
+            6 => (((((c[6] * x + c[5]) * x + c[4]) * x + c[3]) * x + c[2]) * x + c[1]) * x + c[0],
+            _ => {
+                let mut acc = 0.0;
+                for i in (0..=self.deg.min(MAX_DEGREE)).rev() {
+                    acc = acc * x + c[i];
+                }
+                acc
+            }
         }
-        acc
     }
 
     /// Derivative.
