@@ -215,20 +215,14 @@ pub fn calculate(input: &Input) -> Result<Trajectory, ProfileError> {
 fn calculate_into(input: &Input, traj: &mut Trajectory) -> Result<(), ProfileError> {
     input.validate()?;
     let n = input.dofs;
-    let solve = |i: usize| {
-        Step1::solve(
-            input.control_interface,
-            &input.current[i],
-            &input.target[i],
-            &input.limits[i],
-        )
-        .ok_or(ProfileError::NoSolution { dof: i })
-    };
     // Step 1 results are large (a brake profile and the candidate shapes); they are written in
     // place instead of copying a filled array.
     let mut st = [MaybeUninit::<Step1>::uninit(); MAX_DOFS];
     for (i, s) in st.iter_mut().enumerate().take(n) {
-        s.write(solve(i)?);
+        let (c, t, l) = (&input.current[i], &input.target[i], &input.limits[i]);
+        if !Step1::solve_into(s, input.control_interface, c, t, l) {
+            return Err(ProfileError::NoSolution { dof: i });
+        }
     }
     // SAFETY: the first `n` entries were initialised above (the loop returns early otherwise);
     // `MaybeUninit<Step1>` has the layout of `Step1`.

@@ -43,13 +43,31 @@ impl Step1 {
         target: &State,
         lim: &Limits,
     ) -> Option<Step1> {
+        let mut out = MaybeUninit::uninit();
+        if Self::solve_into(&mut out, interface, current, target, lim) {
+            // SAFETY: `solve_into` initialises `out` before it returns true.
+            Some(unsafe { out.assume_init() })
+        } else {
+            None
+        }
+    }
+
+    /// [`Step1::solve`] written in place into `out` (the result is a few kB); returns false if
+    /// no profile was found (`out` is then initialised but not meaningful).
+    pub fn solve_into(
+        out: &mut MaybeUninit<Step1>,
+        interface: ControlInterface,
+        current: &State,
+        target: &State,
+        lim: &Limits,
+    ) -> bool {
         let brake = match interface {
             ControlInterface::Position => position_brake(*current, lim),
             ControlInterface::Velocity => velocity_brake(*current, lim),
         };
         let start = brake.end();
         let problem = Problem::new(&start, target, lim);
-        let mut s = Step1 {
+        let s = out.write(Step1 {
             interface,
             brake,
             problem,
@@ -59,7 +77,7 @@ impl Step1 {
                 dir: 1.0,
             }; MAX_CANDIDATES],
             n_cand: 0,
-        };
+        });
         // Scratch list of all solutions; left uninitialised (4 kB) and written as they come.
         let mut all = [MaybeUninit::<Shape>::uninit(); 64];
         let mut n = 0;
@@ -83,7 +101,7 @@ impl Step1 {
             }
         }
         if n == 0 {
-            return None;
+            return false;
         }
         // SAFETY: the first `n` entries were written by `collect`; `MaybeUninit<Shape>` has the
         // layout of `Shape`.
@@ -103,7 +121,7 @@ impl Step1 {
                 s.n_cand += 1;
             }
         }
-        Some(s)
+        true
     }
 
     fn zero_solution(&self) -> bool {
