@@ -31,7 +31,7 @@
 //! Every root is turned into a profile and validated (durations >= 0, limits, final state).
 
 use super::limits::{Limits, State};
-use super::poly::{Poly, ROOTS_CAP};
+use super::poly::{Poly, MAX_DEGREE, ROOTS_CAP};
 use super::profile::{integrate_checked, Profile};
 
 /// The sub-shapes of the UDDU family (see module doc).
@@ -362,30 +362,45 @@ pub fn solve_case(pr: &Problem, case: Case, goal: Goal, out: &mut impl FnMut(Sha
     };
     let eq = match goal {
         Goal::Position => {
-            // Symbolic integration of the homogenised state.
+            // Symbolic integration of the homogenised state, on the coefficient arrays in place
+            // (formal degree 6; entries above the true degree stay exact zeros).
             let jerks = pr.jerks();
-            let mut p = zero();
-            let mut v = u.mul(&u).scale(pr.v0);
-            let mut a = u.scale(pr.a0);
+            let mut p = [0.0; N];
+            let mut v = u.mul(&u).scale(pr.v0).c;
+            let mut a = u.scale(pr.a0).c;
             for (ti, jk) in cp.t.iter().zip(jerks) {
                 if ti.c.iter().all(|c| *c == 0.0) {
                     continue;
                 }
+                let t = [ti.c[0], ti.c[1], ti.c[2]];
+                debug_assert!(ti.deg <= 2);
                 if jk == 0.0 {
                     // Plateau: p += T (v + T a/2), v += T a.
-                    p = p.add(&ti.mul_low(&v.add(&ti.mul_low(&a.scale(0.5)))));
-                    v = v.add(&ti.mul_low(&a));
+                    let w = mul_t(&t, &a.map(|x| x * 0.5));
+                    let pw = mul_t(&t, &add(&v, &w));
+                    p = add(&p, &pw);
+                    v = add(&v, &mul_t(&t, &a));
                     continue;
                 }
                 // Horner form in the phase duration: three products per phase.
                 // p += T (v + T (a/2 + j T/6)), v += T (a + j T/2), a += j T.
-                let jt = ti.scale(jk);
-                let inner = a.scale(0.5).add(&jt.scale(1.0 / 6.0));
-                p = p.add(&ti.mul_low(&v.add(&ti.mul_low(&inner))));
-                v = v.add(&ti.mul_low(&a.add(&jt.scale(0.5))));
-                a = a.add(&jt);
+                let mut jt = [0.0; N];
+                for (x, tk) in jt.iter_mut().zip(&ti.c) {
+                    *x = tk * jk;
+                }
+                let inner = add(&a.map(|x| x * 0.5), &jt.map(|x| x * (1.0 / 6.0)));
+                let pw = mul_t(&t, &add(&v, &mul_t(&t, &inner)));
+                p = add(&p, &pw);
+                v = add(&v, &mul_t(&t, &add(&a, &jt.map(|x| x * 0.5))));
+                a = add(&a, &jt);
             }
-            p.sub(&u.mul_low(&u).mul_low(&u).scale(pr.d))
+            let d3 = u.mul_low(&u).mul_low(&u).scale(pr.d);
+            let mut r = Poly::constant(0.0);
+            r.deg = MAX_DEGREE;
+            for ((rk, pk), dk) in r.c.iter_mut().zip(&p).zip(&d3.c) {
+                *rk = pk - dk;
+            }
+            r
         }
         Goal::Duration(td) => {
             let mut tt = zero();
@@ -421,6 +436,35 @@ pub fn solve_case(pr: &Problem, case: Case, goal: Goal, out: &mut impl FnMut(Sha
             out(s);
         }
     }
+}
+
+const N: usize = MAX_DEGREE + 1;
+
+/// Coefficient-wise sum.
+#[inline]
+fn add(x: &[f64; N], y: &[f64; N]) -> [f64; N] {
+    let mut r = *x;
+    for (a, b) in r.iter_mut().zip(y) {
+        *a += b;
+    }
+    r
+}
+
+/// Product of the polynomial `t0 + t1 u + t2 u^2` with `x` (truncated to degree 6, which the
+/// integration never exceeds); the operations and order of [`Poly::mul_low`].
+#[inline]
+fn mul_t(t: &[f64; 3], x: &[f64; N]) -> [f64; N] {
+    let mut r = [0.0; N];
+    for k in 0..N {
+        r[k] = t[0] * x[k];
+    }
+    for k in 1..N {
+        r[k] += t[1] * x[k - 1];
+    }
+    for k in 2..N {
+        r[k] += t[2] * x[k - 2];
+    }
+    r
 }
 
 /// Phase durations of a polynomial case at parameter `r`.
