@@ -6,7 +6,7 @@ library, so without Python overhead), median of repeated calculations per case.
 pcr-planner: `cargo bench -p pcr-planner --bench profiler` with PROFILE_BENCH_CASES set, which
 times `calculate()` per case (median of 21 runs).
 
-Usage: profile_bench.py [--cases N] [--seed S] [--repeats R]
+Usage: profile_bench.py [--cases N] [--seed S] [--repeats R] [--write-cases PATH]
 """
 
 import argparse
@@ -70,9 +70,14 @@ def main():
     ap.add_argument("--cases", type=int, default=1000)
     ap.add_argument("--seed", type=int, default=4242)
     ap.add_argument("--repeats", type=int, default=21)
+    ap.add_argument("--write-cases", metavar="PATH",
+                    help="only write the cases file (for instruction counting) and exit")
     args = ap.parse_args()
 
     cases = gen_cases(args.cases, args.seed)
+    if args.write_cases:
+        Path(args.write_cases).write_text(json.dumps({"cases": cases}))
+        return 0
     tmp = Path(tempfile.mkdtemp(prefix="profile_bench_"))
     path = tmp / "cases.json"
     path.write_text(json.dumps({"cases": cases}))

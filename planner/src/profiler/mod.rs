@@ -27,6 +27,8 @@ pub use limits::{Limits, State};
 pub use profile::{PositionExtrema, Profile};
 pub use step1::Step1;
 
+use std::mem::MaybeUninit;
+
 /// Maximal number of degrees of freedom of one [`Input`].
 pub const MAX_DOFS: usize = 8;
 
@@ -194,23 +196,38 @@ impl Trajectory {
 
 /// Computes the time-optimal (synchronised) trajectory for `input`.
 pub fn calculate(input: &Input) -> Result<Trajectory, ProfileError> {
+    // The trajectory (several kB) is filled in place in the return value rather than
+    // assembled and moved.
+    let mut res = Ok(Trajectory {
+        dofs: input.dofs,
+        duration: 0.0,
+        profiles: [Profile::new(State::default()); MAX_DOFS],
+    });
+    if let Ok(traj) = &mut res {
+        if let Err(e) = calculate_into(input, traj) {
+            res = Err(e);
+        }
+    }
+    res
+}
+
+/// [`calculate`] into `traj` (whose `dofs` is set, profiles overwritten).
+fn calculate_into(input: &Input, traj: &mut Trajectory) -> Result<(), ProfileError> {
     input.validate()?;
     let n = input.dofs;
-    let solve = |i: usize| {
-        Step1::solve(
-            input.control_interface,
-            &input.current[i],
-            &input.target[i],
-            &input.limits[i],
-        )
-        .ok_or(ProfileError::NoSolution { dof: i })
-    };
-    let mut st = [solve(0)?; MAX_DOFS];
-    for (i, s) in st.iter_mut().enumerate().take(n).skip(1) {
-        *s = solve(i)?;
+    // Step 1 results are large (a brake profile and the candidate shapes); they are written in
+    // place instead of copying a filled array.
+    let mut st = [MaybeUninit::<Step1>::uninit(); MAX_DOFS];
+    for (i, s) in st.iter_mut().enumerate().take(n) {
+        let (c, t, l) = (&input.current[i], &input.target[i], &input.limits[i]);
+        if !Step1::solve_into(s, input.control_interface, c, t, l) {
+            return Err(ProfileError::NoSolution { dof: i });
+        }
     }
-    let steps = &st[..n];
-    let mut profiles = [Profile::new(State::default()); MAX_DOFS];
+    // SAFETY: the first `n` entries were initialised above (the loop returns early otherwise);
+    // `MaybeUninit<Step1>` has the layout of `Step1`.
+    let steps: &[Step1] = unsafe { std::slice::from_raw_parts(st.as_ptr().cast::<Step1>(), n) };
+    let profiles = &mut traj.profiles;
     if input.synchronization == Synchronization::None || n == 1 && input.minimum_duration.is_none()
     {
         // As ruckig: with no synchronisation the minimum duration only extends the total.
@@ -219,31 +236,34 @@ pub fn calculate(input: &Input) -> Result<Trajectory, ProfileError> {
             profiles[i] = steps[i].optimal_profile();
             duration = duration.max(profiles[i].duration());
         }
-        return Ok(Trajectory {
-            dofs: n,
-            duration,
-            profiles,
-        });
+        traj.duration = duration;
+        return Ok(());
     }
     let t_lower = steps
         .iter()
         .map(|s| s.t_min())
         .fold(input.minimum_duration.unwrap_or(0.0), f64::max);
-    let t_sync =
-        step2::synchronized_duration(steps, t_lower).ok_or(ProfileError::NoSynchronization)?;
-    for i in 0..n {
-        profiles[i] = steps[i]
-            .profile_at(t_sync)
-            .ok_or(ProfileError::NoSolution { dof: i })?;
-    }
+    // The lower bound is the first synchronisation candidate and usually feasible for every
+    // DoF: build the profiles directly (one fixed-duration solve per DoF instead of a
+    // feasibility test followed by the same solve).
+    let all_ok = (0..n).all(|i| steps[i].profile_at_checked_into(t_lower, &mut profiles[i]));
+    let t_sync = if all_ok {
+        t_lower
+    } else {
+        let t_sync =
+            step2::synchronized_duration(steps, t_lower).ok_or(ProfileError::NoSynchronization)?;
+        for i in 0..n {
+            if !steps[i].profile_at_into(t_sync, &mut profiles[i]) {
+                return Err(ProfileError::NoSolution { dof: i });
+            }
+        }
+        t_sync
+    };
     if input.synchronization == Synchronization::Phase {
-        phase_synchronize(input, steps, t_sync, &mut profiles);
+        phase_synchronize(input, steps, t_sync, &mut profiles[..]);
     }
-    Ok(Trajectory {
-        dofs: n,
-        duration: t_sync,
-        profiles,
-    })
+    traj.duration = t_sync;
+    Ok(())
 }
 
 /// Replaces the profiles by scaled copies of the limiting DoF's profile if the motion is

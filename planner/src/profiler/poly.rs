@@ -4,8 +4,10 @@
 //! parameter (see `shapes.rs`) and isolating all of its real roots in the parameter's admissible
 //! interval. No allocation: coefficients live in a fixed array.
 
-/// Maximal degree a [`Poly`] can hold.
-pub const MAX_DEGREE: usize = 10;
+/// Maximal degree a [`Poly`] can hold. The largest equation is the homogenised final position
+/// of the no-plateau shape (`shapes.rs`): phase durations of degree 2 times the parameter, state
+/// `(u^3 p, u^2 v, u a)`, so degree 6; every intermediate product stays within it.
+pub const MAX_DEGREE: usize = 6;
 
 /// Capacity of a root list: simple roots plus (near-)double roots reported at critical points.
 pub const ROOTS_CAP: usize = 2 * MAX_DEGREE + 2;
@@ -41,21 +43,31 @@ impl Poly {
     }
 
     /// Sum.
+    #[inline]
     pub fn add(&self, o: &Poly) -> Poly {
+        // Fixed-length loops (entries above `deg` are zero): unrolled and vectorised, and the
+        // same result as looping to the degree.
         let mut r = *self;
         r.deg = self.deg.max(o.deg);
-        for i in 0..=o.deg {
-            r.c[i] += o.c[i];
+        for (rc, oc) in r.c.iter_mut().zip(&o.c) {
+            *rc += oc;
         }
         r
     }
 
     /// Difference.
+    #[inline]
     pub fn sub(&self, o: &Poly) -> Poly {
-        self.add(&o.scale(-1.0))
+        let mut r = *self;
+        r.deg = self.deg.max(o.deg);
+        for (rc, oc) in r.c.iter_mut().zip(&o.c) {
+            *rc -= oc;
+        }
+        r
     }
 
     /// Product with a scalar.
+    #[inline]
     pub fn scale(&self, k: f64) -> Poly {
         let mut r = *self;
         for v in r.c.iter_mut() {
@@ -65,6 +77,7 @@ impl Poly {
     }
 
     /// Sum with a scalar.
+    #[inline]
     pub fn add_const(&self, k: f64) -> Poly {
         let mut r = *self;
         r.c[0] += k;
@@ -90,13 +103,49 @@ impl Poly {
         r
     }
 
-    /// Value at `x` (Horner).
-    pub fn eval(&self, x: f64) -> f64 {
-        let mut acc = 0.0;
-        for i in (0..=self.deg).rev() {
-            acc = acc * x + self.c[i];
+    /// Product with `o` for `self` of degree at most 2 (the phase durations): fixed-length,
+    /// branch-free loops with the same operations in the same order as [`Poly::mul`] (the extra
+    /// terms are exact zeros), so the same result.
+    #[inline]
+    pub fn mul_low(&self, o: &Poly) -> Poly {
+        debug_assert!(self.deg <= 2 && self.deg + o.deg <= MAX_DEGREE);
+        let mut r = Poly::constant(0.0);
+        r.deg = (self.deg + o.deg).min(MAX_DEGREE);
+        let (t0, t1, t2) = (self.c[0], self.c[1], self.c[2]);
+        for k in 0..=MAX_DEGREE {
+            r.c[k] = t0 * o.c[k];
         }
-        acc
+        for k in 1..=MAX_DEGREE {
+            r.c[k] += t1 * o.c[k - 1];
+        }
+        for k in 2..=MAX_DEGREE {
+            r.c[k] += t2 * o.c[k - 2];
+        }
+        r
+    }
+
+    /// Value at `x` (Horner).
+    #[inline]
+    pub fn eval(&self, x: f64) -> f64 {
+        // Unrolled per degree (no loop over coefficients in memory); the same operations in the
+        // same order as the loop below.
+        let c = &self.c;
+        match self.deg {
+            0 => c[0],
+            1 => c[1] * x + c[0],
+            2 => (c[2] * x + c[1]) * x + c[0],
+            3 => ((c[3] * x + c[2]) * x + c[1]) * x + c[0],
+            4 => (((c[4] * x + c[3]) * x + c[2]) * x + c[1]) * x + c[0],
+            5 => ((((c[5] * x + c[4]) * x + c[3]) * x + c[2]) * x + c[1]) * x + c[0],
+            6 => (((((c[6] * x + c[5]) * x + c[4]) * x + c[3]) * x + c[2]) * x + c[1]) * x + c[0],
+            _ => {
+                let mut acc = 0.0;
+                for i in (0..=self.deg.min(MAX_DEGREE)).rev() {
+                    acc = acc * x + c[i];
+                }
+                acc
+            }
+        }
     }
 
     /// Derivative.
@@ -121,6 +170,35 @@ impl Poly {
         r
     }
 
+    /// True if `|p|` is provably bounded away from zero on `[lo, hi]` (so there is no root and
+    /// no negligible value anywhere there): with the Taylor coefficients `b_k` at the midpoint
+    /// `m` and the half-width `r`, `|p(x) - b_0| <= sum_{k>=1} |b_k| r^k`. The margin covers the
+    /// rounding of the shift and the "negligible" scale of [`Poly::roots_in`] generously.
+    fn excludes_roots(&self, lo: f64, hi: f64) -> bool {
+        let d = self.deg;
+        let m = 0.5 * (lo + hi);
+        let r = 0.5 * (hi - lo);
+        // Taylor shift by repeated synthetic division, over the full (fixed) length so that it
+        // is unrolled into registers; the coefficients above the degree are zero and stay so.
+        let mut b = self.c;
+        for i in 0..MAX_DEGREE {
+            for k in (i..MAX_DEGREE).rev() {
+                b[k] += m * b[k + 1];
+            }
+        }
+        let (mut bound, mut mag, mut rk, mut xk) = (0.0f64, 0.0f64, 1.0f64, 1.0f64);
+        let xm = m.abs() + r;
+        for (k, (bk, ck)) in b.iter().zip(&self.c).enumerate().take(d + 1) {
+            if k > 0 {
+                bound += bk.abs() * rk;
+            }
+            mag += ck.abs() * xk;
+            rk *= r;
+            xk *= xm;
+        }
+        b[0].abs() > bound + 1e-10 * mag
+    }
+
     /// All real roots in `[lo, hi]`, ascending, written into `out`; returns their count.
     ///
     /// The interval is split at the roots of the derivative (found recursively) into pieces on
@@ -135,6 +213,8 @@ impl Poly {
         }
         match p.deg {
             0 => 0,
+            2 => quadratic_roots_in(&p, lo, hi, out),
+            3 => cubic_roots_in(&p, lo, hi, out),
             1 => {
                 let r = -p.c[0] / p.c[1];
                 if r >= lo && r <= hi {
@@ -144,24 +224,16 @@ impl Poly {
                     0
                 }
             }
+            _ if p.excludes_roots(lo, hi) => 0,
             _ => {
                 let mut crit = [0.0; ROOTS_CAP];
-                let nc = p.deriv().roots_in(lo, hi, &mut crit);
+                let dp = p.deriv();
+                let nc = dp.roots_in(lo, hi, &mut crit);
                 let mut pts = [0.0; ROOTS_CAP + 2];
                 pts[0] = lo;
                 pts[1..=nc].copy_from_slice(&crit[..nc]);
                 pts[nc + 1] = hi;
                 let npts = nc + 2;
-                // "Negligible" value at x: the rounding-error scale of evaluating p there.
-                let tiny_at = |x: f64| {
-                    let mut mag = 0.0f64;
-                    let mut xp = 1.0;
-                    for i in 0..=p.deg {
-                        mag += (p.c[i] * xp).abs();
-                        xp *= x.abs();
-                    }
-                    mag * 1e-13
-                };
                 let xs = lo.abs().max(hi.abs()).max(1e-300);
                 let mut n = 0;
                 let mut push = |r: f64, n: &mut usize| {
@@ -180,13 +252,13 @@ impl Poly {
                         push(a, &mut n);
                         continue;
                     }
-                    if k > 0 && fa.abs() <= tiny_at(a) {
+                    if k > 0 && fa.abs() <= tiny_at(&p, a) {
                         // Possibly a double root at a critical point; keep looking for a
                         // sign change in the piece as well.
                         push(a, &mut n);
                     }
                     if fa.signum() != fb.signum() && fb != 0.0 {
-                        push(bisect(&p, a, b, fa), &mut n);
+                        push(bisect(&p, &dp, a, b, fa), &mut n);
                     }
                 }
                 let fh = p.eval(hi);
@@ -199,11 +271,127 @@ impl Poly {
     }
 }
 
+/// Rounding-error scale of evaluating `p` at `x`: below it a value is negligible.
+fn tiny_at(p: &Poly, x: f64) -> f64 {
+    let mut mag = 0.0f64;
+    let mut xp = 1.0;
+    for i in 0..=p.deg {
+        mag += (p.c[i] * xp).abs();
+        xp *= x.abs();
+    }
+    mag * 1e-13
+}
+
+/// [`Poly::roots_in`] for an exact quadratic (`c[2] != 0`), in closed form: the numerically
+/// stable pair `q = -(b + sign(b) sqrt(b^2 - 4ac)) / 2`, roots `q / a` and `c / q`. As the
+/// general routine, the vertex is reported as well when the value there is negligible (a
+/// double root, possibly with a slightly negative discriminant).
+fn quadratic_roots_in(p: &Poly, lo: f64, hi: f64, out: &mut [f64; ROOTS_CAP]) -> usize {
+    let (c, b, a) = (p.c[0], p.c[1], p.c[2]);
+    let mut cand = [f64::NAN; 3];
+    let disc = b * b - 4.0 * a * c;
+    if disc >= 0.0 {
+        let q = -0.5 * (b + disc.sqrt().copysign(b));
+        if q != 0.0 {
+            cand[0] = q / a;
+            cand[1] = c / q;
+        } else {
+            cand[0] = 0.0;
+        }
+    }
+    let xv = -b / (2.0 * a);
+    if xv > lo && xv < hi && p.eval(xv).abs() <= tiny_at(p, xv) {
+        cand[2] = xv;
+    }
+    collect_roots(&mut cand, lo, hi, out)
+}
+
+/// Writes the finite candidates of `cand` within `[lo, hi]` into `out`, ascending, dropping
+/// near-duplicates (as the general routine); returns their count.
+fn collect_roots(cand: &mut [f64], lo: f64, hi: f64, out: &mut [f64; ROOTS_CAP]) -> usize {
+    cand.sort_unstable_by(f64::total_cmp);
+    let xs = lo.abs().max(hi.abs()).max(1e-300);
+    let mut n = 0;
+    for &r in cand.iter() {
+        if !(lo..=hi).contains(&r) {
+            continue;
+        }
+        if n > 0 && (r - out[n - 1]).abs() <= 1e-14 * xs {
+            continue;
+        }
+        out[n] = r;
+        n += 1;
+    }
+    n
+}
+
+/// Two Newton steps on `p` from `x`, each kept only if it does not increase `|p|`.
+#[inline]
+fn newton_polish(p: &Poly, dp: &Poly, mut x: f64) -> f64 {
+    let mut fx = p.eval(x);
+    for _ in 0..2 {
+        let d = dp.eval(x);
+        if fx == 0.0 || d == 0.0 {
+            break;
+        }
+        let y = x - fx / d;
+        let fy = p.eval(y);
+        if fy.is_nan() || fy.abs() > fx.abs() {
+            break;
+        }
+        (x, fx) = (y, fy);
+    }
+    x
+}
+
+/// [`Poly::roots_in`] for an exact cubic (`c[3] != 0`), in closed form (Cardano with the
+/// cancellation-free pair for one real root, the trigonometric form for three), each root
+/// polished by Newton steps on `p`. As the general routine, a critical point is reported as
+/// well when the value there is negligible (a double root the closed form may split or lose).
+fn cubic_roots_in(p: &Poly, lo: f64, hi: f64, out: &mut [f64; ROOTS_CAP]) -> usize {
+    let a = p.c[3];
+    let (b, c, d) = (p.c[2] / a, p.c[1] / a, p.c[0] / a);
+    // x = y - b/3: y^3 + 3 q y - 2 r = 0.
+    let shift = b / 3.0;
+    let q = (3.0 * c - b * b) / 9.0;
+    let r = (9.0 * b * c - 27.0 * d - 2.0 * b * b * b) / 54.0;
+    let disc = q * q * q + r * r;
+    let dp = p.deriv();
+    let mut cand = [f64::NAN; 5];
+    if disc > 0.0 {
+        let s1 = (r + disc.sqrt().copysign(r)).cbrt();
+        let y = if s1 != 0.0 { s1 - q / s1 } else { 0.0 };
+        cand[0] = newton_polish(p, &dp, y - shift);
+    } else {
+        // q <= 0 here.
+        let m = (-q).sqrt();
+        let cos_arg = if m > 0.0 {
+            (r / (m * m * m)).clamp(-1.0, 1.0)
+        } else {
+            0.0
+        };
+        let th = cos_arg.acos() / 3.0;
+        let k = std::f64::consts::TAU / 3.0;
+        for (i, cv) in cand.iter_mut().take(3).enumerate() {
+            let y = 2.0 * m * (th + k * i as f64).cos();
+            *cv = newton_polish(p, &dp, y - shift);
+        }
+    }
+    // Critical points (roots of the derivative) with a negligible value.
+    let mut crit = [0.0; ROOTS_CAP];
+    let nc = quadratic_roots_in(&dp, lo, hi, &mut crit);
+    for (i, &x) in crit[..nc].iter().enumerate() {
+        if p.eval(x).abs() <= tiny_at(p, x) {
+            cand[3 + i] = x;
+        }
+    }
+    collect_roots(&mut cand, lo, hi, out)
+}
+
 /// Safeguarded Newton iteration on a bracket `[a, b]` where `p(a)` has the sign of `fa` and
 /// `p(b)` the opposite sign: Newton steps while they stay inside the shrinking bracket, bisection
 /// otherwise; converges to (nearly) adjacent floating point numbers.
-fn bisect(p: &Poly, mut a: f64, mut b: f64, fa: f64) -> f64 {
-    let dp = p.deriv();
+fn bisect(p: &Poly, dp: &Poly, mut a: f64, mut b: f64, fa: f64) -> f64 {
     let sa = fa.signum();
     let mut x = 0.5 * (a + b);
     for _ in 0..100 {
@@ -264,6 +452,53 @@ mod tests {
         let n = p.roots_in(0.0, 2.0, &mut out);
         assert_eq!(n, 1);
         assert!((out[0] - 1.0).abs() < 1e-7);
+    }
+
+    #[test]
+    fn quadratic_closed_form() {
+        let mut out = [0.0; ROOTS_CAP];
+        // Widely separated roots (cancellation-prone in the textbook formula).
+        let p = from_roots(&[1e-9, 3e5]);
+        let n = p.roots_in(-1.0, 1e6, &mut out);
+        assert_eq!(n, 2);
+        assert!((out[0] - 1e-9).abs() < 1e-22 && (out[1] - 3e5).abs() < 1e-9);
+        // Range filter.
+        assert_eq!(p.roots_in(1.0, 2.0, &mut out), 0);
+        // Exact and rounded double roots are reported once.
+        let p = from_roots(&[0.1, 0.1]);
+        assert_eq!(p.roots_in(0.0, 1.0, &mut out), 1);
+        assert!((out[0] - 0.1).abs() < 1e-7);
+        let mut q = from_roots(&[0.5, 0.5]);
+        q.c[0] += 1e-17;
+        assert_eq!(q.roots_in(0.0, 1.0, &mut out), 1);
+        assert!((out[0] - 0.5).abs() < 1e-7);
+    }
+
+    #[test]
+    fn cubic_closed_form() {
+        let mut out = [0.0; ROOTS_CAP];
+        for rs in [
+            [-2.0, 0.5, 3.0],
+            [1e-6, 2.0, 2.000001],
+            [-1e3, 0.1, 7.0],
+            [0.3, 0.3, 0.3],
+        ] {
+            let p = from_roots(&rs).scale(-2.5);
+            let n = p.roots_in(-1e4, 1e4, &mut out);
+            // Roots, plus critical points where the value is negligible (close roots).
+            assert!((1..=5).contains(&n), "{rs:?}: {n}");
+            for r in rs {
+                let near = out[..n]
+                    .iter()
+                    .any(|x| (x - r).abs() <= 1e-5 * r.abs().max(1.0));
+                assert!(near, "{rs:?}: {:?}", &out[..n]);
+            }
+        }
+        // One real root.
+        let p = Poly::linear(1.0, 0.0).add(&Poly::x().mul(&Poly::x()).mul(&Poly::x()));
+        assert_eq!(p.roots_in(-5.0, 5.0, &mut out), 1);
+        assert!((out[0] + 1.0).abs() < 1e-14);
+        assert_eq!(p.roots_in(0.0, 5.0, &mut out), 0);
     }
 
     #[test]

@@ -66,6 +66,17 @@ impl Profile {
         true
     }
 
+    /// Makes this profile a copy of `other`, copying only the used entries (cheaper than an
+    /// assignment of the whole fixed-capacity arrays; entries past the length are never read).
+    pub fn copy_from(&mut self, other: &Profile) {
+        let n = other.n;
+        self.n = n;
+        self.t[..n].copy_from_slice(&other.t[..n]);
+        self.j[..n].copy_from_slice(&other.j[..n]);
+        self.s[..=n].copy_from_slice(&other.s[..=n]);
+        self.t0[..=n].copy_from_slice(&other.t0[..=n]);
+    }
+
     /// Appends all segments of `other` (whose start state is assumed to equal this end state).
     pub fn append(&mut self, other: &Profile) -> bool {
         (0..other.n).all(|i| self.push(other.t[i], other.j[i]))
@@ -202,46 +213,51 @@ impl Profile {
     /// sets, so (the dynamics being linear) its state is the combination of both states at
     /// every time. Limits that both respect are respected by the blend (they are convex).
     pub fn blend(a: &Profile, b: &Profile, lambda: f64) -> Profile {
+        let mut r = Profile::new(a.start());
+        r.push_blend(
+            (&a.t[..a.n], &a.j[..a.n]),
+            (&b.t[..b.n], &b.j[..b.n]),
+            lambda,
+        );
+        r
+    }
+
+    /// Appends the blend (see [`Profile::blend`]) of two segment lists `(durations, jerks)`
+    /// (positive durations) that start at this profile's end state.
+    pub(crate) fn push_blend(&mut self, a: (&[f64], &[f64]), b: (&[f64], &[f64]), lambda: f64) {
         // Two pointers over the segments with their *remaining* durations (not cumulative
         // times): the merged durations of short high-jerk segments stay exact even deep into
         // a long profile.
-        let mut r = Profile::new(a.start());
+        let ((at, aj), (bt, bj)) = (a, b);
+        let (an, bn) = (at.len(), bt.len());
+        let seg = |t: &[f64], i: usize| if i < t.len() { t[i] } else { 0.0 };
         let (mut i, mut k) = (0, 0);
-        let (mut ra, mut rb) = (a.seg_or_zero(0), b.seg_or_zero(0));
-        while i < a.n || k < b.n {
-            let dt = match (i < a.n, k < b.n) {
+        let (mut ra, mut rb) = (seg(at, 0), seg(bt, 0));
+        while i < an || k < bn {
+            let dt = match (i < an, k < bn) {
                 (true, true) => ra.min(rb),
                 (true, false) => ra,
                 _ => rb,
             };
-            let ja = if i < a.n { a.j[i] } else { 0.0 };
-            let jb = if k < b.n { b.j[k] } else { 0.0 };
-            r.push(dt, lambda * ja + (1.0 - lambda) * jb);
-            if i < a.n {
+            let ja = if i < an { aj[i] } else { 0.0 };
+            let jb = if k < bn { bj[k] } else { 0.0 };
+            self.push(dt, lambda * ja + (1.0 - lambda) * jb);
+            if i < an {
                 if ra <= dt {
                     i += 1;
-                    ra = a.seg_or_zero(i);
+                    ra = seg(at, i);
                 } else {
                     ra -= dt;
                 }
             }
-            if k < b.n {
+            if k < bn {
                 if rb <= dt {
                     k += 1;
-                    rb = b.seg_or_zero(k);
+                    rb = seg(bt, k);
                 } else {
                     rb -= dt;
                 }
             }
-        }
-        r
-    }
-
-    fn seg_or_zero(&self, i: usize) -> f64 {
-        if i < self.n {
-            self.t[i]
-        } else {
-            0.0
         }
     }
 

@@ -15,6 +15,7 @@ use super::profile::Profile;
 use super::shapes::{self, Goal, Problem, Shape};
 use super::velocity;
 use super::ControlInterface;
+use std::mem::MaybeUninit;
 
 /// Maximal number of distinct candidate durations kept.
 pub const MAX_CANDIDATES: usize = 24;
@@ -42,13 +43,31 @@ impl Step1 {
         target: &State,
         lim: &Limits,
     ) -> Option<Step1> {
+        let mut out = MaybeUninit::uninit();
+        if Self::solve_into(&mut out, interface, current, target, lim) {
+            // SAFETY: `solve_into` initialises `out` before it returns true.
+            Some(unsafe { out.assume_init() })
+        } else {
+            None
+        }
+    }
+
+    /// [`Step1::solve`] written in place into `out` (the result is a few kB); returns false if
+    /// no profile was found (`out` is then initialised but not meaningful).
+    pub fn solve_into(
+        out: &mut MaybeUninit<Step1>,
+        interface: ControlInterface,
+        current: &State,
+        target: &State,
+        lim: &Limits,
+    ) -> bool {
         let brake = match interface {
             ControlInterface::Position => position_brake(*current, lim),
             ControlInterface::Velocity => velocity_brake(*current, lim),
         };
         let start = brake.end();
         let problem = Problem::new(&start, target, lim);
-        let mut s = Step1 {
+        let s = out.write(Step1 {
             interface,
             brake,
             problem,
@@ -58,15 +77,13 @@ impl Step1 {
                 dir: 1.0,
             }; MAX_CANDIDATES],
             n_cand: 0,
-        };
-        let mut all = [Shape {
-            t: [0.0; 7],
-            dir: 1.0,
-        }; 64];
+        });
+        // Scratch list of all solutions; left uninitialised (4 kB) and written as they come.
+        let mut all = [MaybeUninit::<Shape>::uninit(); 64];
         let mut n = 0;
         let mut collect = |sh: Shape| {
             if n < all.len() {
-                all[n] = sh;
+                all[n].write(sh);
                 n += 1;
             }
         };
@@ -84,9 +101,12 @@ impl Step1 {
             }
         }
         if n == 0 {
-            return None;
+            return false;
         }
-        let all = &mut all[..n];
+        // SAFETY: the first `n` entries were written by `collect`; `MaybeUninit<Shape>` has the
+        // layout of `Shape`.
+        let all: &mut [Shape] =
+            unsafe { std::slice::from_raw_parts_mut(all.as_mut_ptr().cast::<Shape>(), n) };
         all.sort_by(|a, b| a.duration().total_cmp(&b.duration()));
         for sh in all.iter() {
             let d = sh.duration();
@@ -101,7 +121,7 @@ impl Step1 {
                 s.n_cand += 1;
             }
         }
-        Some(s)
+        true
     }
 
     fn zero_solution(&self) -> bool {
@@ -199,6 +219,24 @@ impl Step1 {
             || self.feasible_main(td)
     }
 
+    /// [`Step1::profile_at`] if `t` is feasible ([`Step1::is_feasible`]), None otherwise: one
+    /// fixed-duration solve instead of a feasibility test followed by the same solve.
+    pub fn profile_at_checked(&self, t: f64) -> Option<Profile> {
+        let mut p = Profile::new(State::default());
+        self.profile_at_checked_into(t, &mut p).then_some(p)
+    }
+
+    /// [`Step1::profile_at_checked`] written into `out` (no copies of whole profiles); returns
+    /// false (and leaves `out` unspecified) if `t` is not feasible.
+    pub fn profile_at_checked_into(&self, t: f64, out: &mut Profile) -> bool {
+        let td = t - self.brake_duration();
+        let tol = 1e-12 * td.abs().max(1.0);
+        if td < self.cand[0].duration() - tol {
+            return false;
+        }
+        self.profile_at_into(t, out)
+    }
+
     /// The time-optimal profile (brake included).
     pub fn optimal_profile(&self) -> Profile {
         self.with_brake(&self.cand[0].profile(self.start, self.problem.lim.jmax))
@@ -215,29 +253,46 @@ impl Step1 {
     /// inside, the convex combination of the position-maximal and position-minimal shapes of
     /// that duration that lands exactly on the target.
     pub fn profile_at(&self, t: f64) -> Option<Profile> {
+        let mut p = Profile::new(State::default());
+        self.profile_at_into(t, &mut p).then_some(p)
+    }
+
+    /// [`Step1::profile_at`] written into `out`; returns false (and leaves `out` unspecified)
+    /// if `t` is not feasible.
+    pub fn profile_at_into(&self, t: f64, out: &mut Profile) -> bool {
         let td = t - self.brake_duration();
         let tol = 1e-12 * td.abs().max(1.0);
         let jmax = self.problem.lim.jmax;
         for c in &self.cand[..self.n_cand] {
             if (c.duration() - td).abs() <= tol {
-                return Some(self.with_brake(&c.profile(self.start, jmax)));
+                // The brake ends at `start`: the phases continue from its end state.
+                out.copy_from(&self.brake);
+                c.push_onto(out, jmax);
+                return true;
             }
         }
-        let (hi, shi) = self.extreme_at(1.0, td)?;
-        let (lo, slo) = self.extreme_at(-1.0, td)?;
+        let Some((hi, shi)) = self.extreme_at(1.0, td) else {
+            return false;
+        };
+        let Some((lo, slo)) = self.extreme_at(-1.0, td) else {
+            return false;
+        };
         let g = self.goal_value();
         let tolg = self.goal_tol();
         if g > hi + tolg || g < lo - tolg {
-            return None;
+            return false;
         }
-        let phi = shi.profile(self.start, jmax);
-        let plo = slo.profile(self.start, jmax);
-        let main = if hi - lo <= 1e-14 * g.abs().max(1.0) {
-            phi
+        out.copy_from(&self.brake);
+        if hi - lo <= 1e-14 * g.abs().max(1.0) {
+            shi.push_onto(out, jmax);
         } else {
+            // The blend of the two extremal shapes, pushed directly after the brake (the same
+            // segments as `Profile::blend` of their profiles).
+            let (ta, ja, na) = shi.segments(jmax);
+            let (tb, jb, nb) = slo.segments(jmax);
             let lambda = ((g - lo) / (hi - lo)).clamp(0.0, 1.0);
-            Profile::blend(&phi, &plo, lambda)
-        };
-        Some(self.with_brake(&main))
+            out.push_blend((&ta[..na], &ja[..na]), (&tb[..nb], &jb[..nb]), lambda);
+        }
+        true
     }
 }
