@@ -4,6 +4,7 @@
 
 pub mod config;
 pub mod ctl;
+pub mod figure;
 pub mod supervisor;
 
 pub use config::{ConfigError, SupervisorConfig};

@@ -756,6 +756,12 @@ impl Supervisor {
             run.acc
         ));
         println!("recording: {} ({rows} rows)", run.path.display());
+        if run.acc.n > 0 {
+            match crate::figure::run_figure(&run.path) {
+                Ok(f) => println!("figure: {}", f.display()),
+                Err(e) => tracing::warn!("no figure of the run: {e}"),
+            }
+        }
         if run.acc.n == 0 {
             println!(
                 "path accuracy: not measured (no measured pose: the serial backend has no pose \
