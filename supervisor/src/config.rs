@@ -87,6 +87,8 @@ pub enum Backend {
     Plant,
     /// The firmware over a serial port.
     Serial,
+    /// Firmware in the loop: the serial driver -> the real firmware in simavr -> the plant.
+    Fil,
 }
 
 fn d_prefix() -> String {
@@ -323,7 +325,10 @@ impl SupervisorConfig {
             }
             match (p.name, p.backend) {
                 (ProcessName::Driver, None) => {
-                    return Err(bad(key("backend"), "missing (sim, plant or serial)".into()))
+                    return Err(bad(
+                        key("backend"),
+                        "missing (sim, plant, fil or serial)".into(),
+                    ))
                 }
                 (ProcessName::Driver, Some(Backend::Serial)) if p.port.is_none() => {
                     return Err(bad(key("port"), "the serial backend needs a port".into()))
@@ -337,10 +342,10 @@ impl SupervisorConfig {
                 }
                 _ => {}
             }
-            if p.plant.is_some() && p.backend != Some(Backend::Plant) {
+            if p.plant.is_some() && !matches!(p.backend, Some(Backend::Plant | Backend::Fil)) {
                 return Err(bad(
                     key("plant"),
-                    "only the plant backend takes a plant configuration".into(),
+                    "only the plant and fil backends take a plant configuration".into(),
                 ));
             }
             if p.port.is_some() && p.name != ProcessName::Driver {

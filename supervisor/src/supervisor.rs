@@ -223,8 +223,9 @@ impl Supervisor {
             Some(Backend::Sim) => {
                 cmd.arg("--backend").arg("sim");
             }
-            Some(Backend::Plant) => {
-                cmd.arg("--backend").arg("plant");
+            Some(b @ (Backend::Plant | Backend::Fil)) => {
+                cmd.arg("--backend")
+                    .arg(if b == Backend::Plant { "plant" } else { "fil" });
                 if let Some(plant) = &p.cfg.plant {
                     cmd.arg("--plant").arg(plant);
                 }
@@ -379,6 +380,7 @@ impl Supervisor {
             .map_or("?", |b| match b {
                 Backend::Sim => "pcr-supervisor, ideal drive (sim)",
                 Backend::Plant => "pcr-supervisor, simulated plant",
+                Backend::Fil => "pcr-supervisor, firmware in the loop (simavr) and simulated plant",
                 Backend::Serial => "pcr-supervisor, serial driver",
             });
         let created = stamp.to_string();

@@ -14,6 +14,7 @@ use pcr_control::{
     PlantDrive, PoseSensor, SafeDriver,
 };
 use pcr_driver::{Driver, SerialConfig, SerialDriver};
+use pcr_fil::{FilOptions, FirmwareInTheLoop};
 use pcr_kinematics::Robot;
 use pcr_messages::{
     monotonic_ns, services as s, DriverStateMsg, Heartbeat, JointSetpoint, NodeKind,
@@ -28,6 +29,8 @@ enum Backend {
     Sim,
     /// The simulated plant (pcr-plant) with its motion-capture view.
     Plant,
+    /// Firmware in the loop: the serial driver -> the real firmware in simavr -> the plant.
+    Fil,
     /// The stepper firmware over a serial port.
     Serial,
 }
@@ -100,6 +103,27 @@ fn run(a: Args) -> Result<()> {
             let step = DriverStep::new(drv, sensor, period);
             serve(c, cn, guard, step)
         }
+        Backend::Fil => {
+            let plant_cfg = match &a.plant {
+                Some(p) => PlantConfig::load(p).with_context(|| format!("plant {p}"))?,
+                None => PlantConfig::prototype(),
+            };
+            let fil = FirmwareInTheLoop::start(&robot_cfg, &plant_cfg, FilOptions::default())
+                .map_err(|e| anyhow!("firmware in the loop: {e}"))?;
+            let frame = fil.plant().capture_model().frame;
+            let last = std::rc::Rc::new(std::cell::Cell::new(None));
+            let drv = safety_stack(
+                FilDrive {
+                    fil,
+                    frame,
+                    last: last.clone(),
+                },
+                &robot,
+                watchdog_s,
+            );
+            let step = DriverStep::new(drv, SharedPose { last }, period);
+            serve(c, cn, guard, step)
+        }
         Backend::Serial => {
             let serial = SerialDriver::open(SerialConfig::new(a.port.clone()))
                 .with_context(|| format!("serial port {}", a.port))?;
@@ -125,6 +149,62 @@ fn sim_start(cn: &ChainNode, home: [i32; 3]) -> Result<[i32; 3]> {
         std::thread::sleep(std::time::Duration::from_millis(10));
     }
     Ok(home)
+}
+
+/// The firmware-in-the-loop backend with the plant's capture view kept for [`SharedPose`].
+struct FilDrive {
+    fil: FirmwareInTheLoop,
+    frame: pcr_plant::Frame,
+    last: std::rc::Rc<std::cell::Cell<Option<pcr_kinematics::Pose>>>,
+}
+
+impl Driver for FilDrive {
+    fn name(&self) -> &str {
+        "fil"
+    }
+    fn write(
+        &mut self,
+        time_s: f64,
+        period_s: f64,
+        cmd: &pcr_driver::MotorCommand,
+    ) -> Result<(), pcr_driver::DriverError> {
+        self.fil.write(time_s, period_s, cmd)
+    }
+    fn read(
+        &mut self,
+        time_s: f64,
+        period_s: f64,
+    ) -> Result<pcr_driver::DriverState, pcr_driver::DriverError> {
+        let s = self.fil.read(time_s, period_s)?;
+        for m in self.fil.drain_measurements() {
+            if let Some(p) = m.in_robot_frame(&self.frame).pose {
+                self.last
+                    .set(Some(pcr_kinematics::Pose::new(p[0], p[1], p[2])));
+            }
+        }
+        Ok(s)
+    }
+    fn diagnostics(&self) -> Vec<(String, u64)> {
+        self.fil.diagnostics()
+    }
+}
+
+/// The latest capture sample of the FIL's plant as the measured pose.
+struct SharedPose {
+    last: std::rc::Rc<std::cell::Cell<Option<pcr_kinematics::Pose>>>,
+}
+
+impl PoseSensor for SharedPose {
+    fn name(&self) -> &str {
+        "fil-plant-capture"
+    }
+    fn measure(
+        &mut self,
+        _time_s: f64,
+        _state: &pcr_driver::DriverState,
+    ) -> Option<pcr_kinematics::Pose> {
+        self.last.take()
+    }
 }
 
 /// Steps a fresh plant to `target` (rate-limited by the plant itself), at most 30 s.
