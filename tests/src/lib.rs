@@ -1,1 +1,66 @@
-//! Integration tests live in `tests/tests/`; this library is empty.
+//! Integration tests live in `tests/tests/`; this library holds what they share.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// The repository root.
+pub fn workspace() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// Builds the process binaries and the supervisor (debug) and returns their folder.
+pub fn chain_bin_dir() -> PathBuf {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let st = Command::new(cargo)
+        .current_dir(workspace())
+        .args([
+            "build",
+            "-q",
+            "-p",
+            "pcr-nodes",
+            "-p",
+            "pcr-supervisor",
+            "--bins",
+        ])
+        .status()
+        .expect("cargo build");
+    assert!(st.success(), "cannot build the chain binaries");
+    let exe = std::env::current_exe().expect("test executable");
+    exe.ancestors().nth(3).expect("target folder").join("debug")
+}
+
+/// A shipped supervisor configuration made private to one test: its own iceoryx2 prefix and
+/// recording folder, no real-time settings, a lenient heartbeat time-out (the 2 cores are shared).
+pub fn private_config(shipped: &str, prefix: &str, rec_dir: &Path, bin_dir: &Path) -> String {
+    let text = std::fs::read_to_string(workspace().join(shipped)).expect("shipped config");
+    let body: Vec<String> = text
+        .lines()
+        .filter(|l| {
+            let t = l.trim_start();
+            !t.starts_with("priority")
+                && !t.starts_with("cpu")
+                && !t.starts_with("iceoryx2_prefix")
+                && !t.starts_with("recording_dir")
+                && !t.starts_with("heartbeat_timeout_ms")
+        })
+        .map(|l| l.replace("mlockall = true", "mlockall = false"))
+        .collect();
+    format!(
+        "bin_dir = {:?}\niceoryx2_prefix = {prefix:?}\nrecording_dir = {:?}\nheartbeat_timeout_ms = 5000.0\n{}\n",
+        bin_dir.display().to_string(),
+        rec_dir.display().to_string(),
+        body.join("\n")
+    )
+}
+
+/// Files in /dev/shm left behind by an iceoryx2 prefix.
+pub fn shm_leftovers(prefix: &str) -> Vec<String> {
+    std::fs::read_dir("/dev/shm")
+        .map(|d| {
+            d.flatten()
+                .map(|e| e.file_name().to_string_lossy().to_string())
+                .filter(|n| n.starts_with(prefix))
+                .collect()
+        })
+        .unwrap_or_default()
+}
