@@ -90,10 +90,10 @@ fn lab_chain_runs_the_square_on_the_emulated_firmware() {
     eprintln!("{out}\n{err}");
     let rec = std::fs::read_dir(tmp.join("rec"))
         .unwrap()
-        .next()
-        .unwrap()
-        .unwrap()
-        .path();
+        .flatten()
+        .map(|e| e.path())
+        .find(|p| p.extension().is_some_and(|x| x == "csv"))
+        .expect("a recording");
     let csv = std::fs::read_to_string(rec).unwrap();
     assert!(csv.contains("# source = pcr-supervisor, serial driver"));
     let last: Vec<i64> = csv

@@ -234,10 +234,10 @@ fn run_paper_prints_the_summary_and_exits_zero() {
     // The recording exists in the recording format.
     let rec = std::fs::read_dir(chain.dir.path().join("rec"))
         .unwrap()
-        .next()
-        .unwrap()
-        .unwrap()
-        .path();
+        .flatten()
+        .map(|e| e.path())
+        .find(|p| p.extension().is_some_and(|x| x == "csv"))
+        .expect("a recording");
     let csv = std::fs::read_to_string(rec).unwrap();
     let header = csv.lines().find(|l| !l.starts_with('#')).unwrap();
     assert_eq!(
@@ -488,10 +488,10 @@ fn a_killed_planner_aborts_the_run_and_the_robot_holds() {
     assert!(o.iter().any(|l| l.contains("aborted")), "{o:?}");
     let rec = std::fs::read_dir(chain.dir.path().join("rec"))
         .unwrap()
-        .next()
-        .unwrap()
-        .unwrap()
-        .path();
+        .flatten()
+        .map(|e| e.path())
+        .find(|p| p.extension().is_some_and(|x| x == "csv"))
+        .expect("a recording");
     let csv = std::fs::read_to_string(rec).unwrap();
     let q: Vec<(f64, [i64; 3])> = csv
         .lines()
