@@ -6,39 +6,10 @@
 //! Needs avr-gcc and simavr (`bash scripts/setup.sh`), like `driver/tests/firmware_sim.rs`.
 
 use pcr_driver::sim::{build_firmware, SimFirmware};
-use std::path::{Path, PathBuf};
+use pcr_integration_tests::{chain_bin_dir as bin_dir, workspace};
+use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
-
-fn workspace() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-fn bin_dir() -> PathBuf {
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let st = Command::new(cargo)
-        .current_dir(workspace())
-        .args([
-            "build",
-            "-q",
-            "-p",
-            "pcr-nodes",
-            "-p",
-            "pcr-supervisor",
-            "--bins",
-        ])
-        .status()
-        .expect("cargo build");
-    assert!(st.success());
-    let exe = std::env::current_exe().unwrap();
-    exe.parent()
-        .unwrap()
-        .parent()
-        .unwrap()
-        .parent()
-        .unwrap()
-        .join("debug")
-}
 
 #[test]
 fn lab_chain_runs_the_square_on_the_emulated_firmware() {

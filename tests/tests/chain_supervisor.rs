@@ -6,6 +6,7 @@
 //! recording directory, and checks that no iceoryx2 file of its prefix is left behind. The
 //! tests run one at a time (2 cores): heartbeat timing must not suffer from a neighbour's load.
 
+use pcr_integration_tests::{chain_bin_dir, workspace};
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
@@ -15,34 +16,10 @@ use std::time::{Duration, Instant};
 
 static SERIAL: Mutex<()> = Mutex::new(());
 
-fn workspace() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-/// Builds the chain's binaries once (dev profile) and returns their directory.
+/// The chain's binaries, built once per test binary.
 fn bin_dir() -> &'static Path {
     static DIR: OnceLock<PathBuf> = OnceLock::new();
-    DIR.get_or_init(|| {
-        let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-        let st = Command::new(cargo)
-            .current_dir(workspace())
-            .args([
-                "build",
-                "-q",
-                "-p",
-                "pcr-nodes",
-                "-p",
-                "pcr-supervisor",
-                "--bins",
-            ])
-            .status()
-            .expect("cargo build");
-        assert!(st.success(), "building the chain binaries failed");
-        // The test binary lives in target/<profile>/deps; cargo build writes target/debug.
-        let exe = std::env::current_exe().unwrap();
-        let target = exe.parent().unwrap().parent().unwrap().parent().unwrap();
-        target.join("debug")
-    })
+    DIR.get_or_init(chain_bin_dir)
 }
 
 struct Chain {
