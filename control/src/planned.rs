@@ -6,7 +6,7 @@
 //! distance from singularity, drive step rates) sampled every 2 ms, and refuses a program the
 //! robot cannot follow. `sample` evaluates the planned profile: no allocation.
 
-use crate::setpoint::{Move, PlanError, SetpointSource};
+use crate::setpoint::{active_piece, Move, PlanError, SetpointSource};
 use pcr_kinematics::{CheckOptions, Pose, Robot};
 use pcr_planner::path::{Path, Pose as PPose};
 use pcr_planner::speed::{SpeedLimits, SpeedProfile};
@@ -175,15 +175,7 @@ impl SetpointSource for PlannerSource {
         if self.pieces.is_empty() || tau_s <= 0.0 {
             return self.start;
         }
-        let mut k = 0;
-        for (i, p) in self.pieces.iter().enumerate() {
-            if p.0 <= tau_s {
-                k = i;
-            } else {
-                break;
-            }
-        }
-        let (t0, d, piece) = &self.pieces[k];
+        let (t0, d, piece) = &self.pieces[active_piece(&self.pieces, tau_s)];
         Self::piece_pose(piece, (tau_s - t0).clamp(0.0, *d))
     }
 }

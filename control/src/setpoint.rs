@@ -65,6 +65,17 @@ pub enum PlanError {
     },
 }
 
+/// Index of the last piece of a timed program (start time first in each tuple, ordered) that
+/// starts at or before `tau_s`; 0 if none does. A linear scan: programs have few pieces, and it
+/// does not allocate.
+pub fn active_piece<T>(pieces: &[(f64, f64, T)], tau_s: f64) -> usize {
+    pieces
+        .iter()
+        .take_while(|p| p.0 <= tau_s)
+        .count()
+        .saturating_sub(1)
+}
+
 /// A source of task-space setpoints (the interpolator's core).
 ///
 /// Implementations: [`InterimPathSource`] (here, interim) and the planner's jerk-limited
@@ -222,16 +233,7 @@ impl SetpointSource for InterimPathSource {
         if self.segs.is_empty() || tau_s <= 0.0 {
             return self.start;
         }
-        // Last segment starting at or before tau (few segments: linear scan, no allocation).
-        let mut k = 0;
-        for (i, s) in self.segs.iter().enumerate() {
-            if s.0 <= tau_s {
-                k = i;
-            } else {
-                break;
-            }
-        }
-        let (t0, d, seg) = self.segs[k];
+        let (t0, d, seg) = self.segs[active_piece(&self.segs, tau_s)];
         let u = if d > 0.0 { (tau_s - t0) / d } else { 1.0 };
         let u = u.clamp(0.0, 1.0);
         match seg {
