@@ -20,6 +20,66 @@ pub enum CommandError {
     /// The command was sent by another protocol version.
     #[error("command of protocol v{0} refused")]
     Version(u32),
+    /// A program is running or paused.
+    #[error("run {0} is in progress: stop it first")]
+    Busy(u32),
+    /// The program was planned from a pose the interpolator no longer holds.
+    #[error("program planned from a pose {0:.3e} away from the held pose: plan again")]
+    Stale(f64),
+}
+
+/// A program planned away from the cycle (by [`prepare_run`], e.g. on a worker thread), ready
+/// for [`InterpolatorStep::install`].
+#[derive(Debug, Clone)]
+pub struct PreparedRun<S> {
+    source: S,
+    duration_s: f64,
+    run_id: u32,
+    start: Pose,
+}
+
+impl<S> PreparedRun<S> {
+    /// The run's id.
+    pub fn run_id(&self) -> u32 {
+        self.run_id
+    }
+
+    /// The program's duration, s.
+    pub fn duration_s(&self) -> f64 {
+        self.duration_s
+    }
+
+    /// The planned source (to drop it somewhere else than the cycle).
+    pub fn into_source(self) -> S {
+        self.source
+    }
+}
+
+/// Plans the program of a RUN command from `start` on `source` (which may allocate and take
+/// milliseconds: the checks sample the whole program finely). Meant to run off the real-time
+/// cycle; the result is installed with [`InterpolatorStep::install`].
+pub fn prepare_run<S: SetpointSource>(
+    mut source: S,
+    cmd: &Command,
+    start: Pose,
+) -> Result<PreparedRun<S>, CommandError> {
+    if cmd.version != PROTOCOL_VERSION {
+        return Err(CommandError::Version(cmd.version));
+    }
+    if cmd.kind != command_kind::RUN {
+        return Err(CommandError::Malformed(format!(
+            "command kind {} is not RUN",
+            cmd.kind
+        )));
+    }
+    let moves = moves_of(cmd)?;
+    let duration_s = source.load(&moves, start)?;
+    Ok(PreparedRun {
+        source,
+        duration_s,
+        run_id: cmd.run_id,
+        start,
+    })
 }
 
 /// Converts a wire command's program into moves (allocates; between cycles only).
@@ -180,18 +240,15 @@ impl<S: SetpointSource> InterpolatorStep<S> {
         }
         match cmd.kind {
             command_kind::RUN => {
+                self.can_start()?;
                 let moves = moves_of(cmd)?;
                 match self.source.load(&moves, self.hold) {
                     Ok(d) => {
-                        self.duration_s = d;
-                        self.tau_s = 0.0;
-                        self.run_id = cmd.run_id;
-                        self.state = planner_state::RUNNING;
-                        self.done_sent = false;
+                        self.start_program(d, cmd.run_id);
                         Ok(())
                     }
                     Err(e) => {
-                        self.state = planner_state::REFUSED;
+                        self.refuse(cmd.run_id);
                         Err(e.into())
                     }
                 }
@@ -216,6 +273,55 @@ impl<S: SetpointSource> InterpolatorStep<S> {
             }
             k => Err(CommandError::Malformed(format!("unknown command kind {k}"))),
         }
+    }
+
+    fn start_program(&mut self, duration_s: f64, run_id: u32) {
+        self.duration_s = duration_s;
+        self.tau_s = 0.0;
+        self.run_id = run_id;
+        self.state = planner_state::RUNNING;
+        self.done_sent = false;
+    }
+
+    /// Whether a new program may start now: not while one runs or is paused (stop it first).
+    pub fn can_start(&self) -> Result<(), CommandError> {
+        if matches!(self.state, planner_state::RUNNING | planner_state::PAUSED) {
+            return Err(CommandError::Busy(self.run_id));
+        }
+        Ok(())
+    }
+
+    /// The pose held now (while idle: where a new program starts).
+    pub fn hold(&self) -> Pose {
+        self.hold
+    }
+
+    /// Marks run `run_id` as refused (its program could not be planned).
+    pub fn refuse(&mut self, run_id: u32) {
+        if self.can_start().is_ok() {
+            self.run_id = run_id;
+            self.state = planner_state::REFUSED;
+        }
+    }
+
+    /// Starts a program planned off the cycle by [`prepare_run`]. Refused while another program
+    /// runs or when the held pose moved since the program was planned from it. Neither
+    /// allocates nor frees: it returns the source no longer needed (the previous one, or the
+    /// refused run's) so that the caller can drop it off the cycle too.
+    pub fn install(&mut self, run: PreparedRun<S>) -> (Result<(), CommandError>, S) {
+        if let Err(e) = self.can_start() {
+            return (Err(e), run.source);
+        }
+        let moved = (run.start.x - self.hold.x)
+            .abs()
+            .max((run.start.y - self.hold.y).abs())
+            .max((run.start.phi - self.hold.phi).abs());
+        if moved > 1e-9 {
+            return (Err(CommandError::Stale(moved)), run.source);
+        }
+        let old = std::mem::replace(&mut self.source, run.source);
+        self.start_program(run.duration_s, run.run_id);
+        (Ok(()), old)
     }
 
     /// Applies a task-space correction offset (x mm, y mm, phi rad) to later setpoints.
@@ -331,6 +437,47 @@ mod tests {
         let b = s.step(t);
         assert_eq!((a.x_mm, a.y_mm), (b.x_mm, b.y_mm));
         assert!(!s.rewind_to_seq(1), "too old");
+    }
+
+    #[test]
+    fn a_program_planned_off_the_cycle_runs_like_a_direct_one() {
+        let cmd = simple_command(command_kind::RUN, program_id::CIRCLE, 4);
+        let mut direct = InterpolatorStep::new(InterimPathSource::new(), Pose::default());
+        direct.command(&cmd).unwrap();
+        let mut off = InterpolatorStep::new(InterimPathSource::new(), Pose::default());
+        let run = prepare_run(InterimPathSource::new(), &cmd, off.hold()).unwrap();
+        assert_eq!(run.run_id(), 4);
+        off.install(run).0.unwrap();
+        let mut t = 0.0;
+        for _ in 0..200 {
+            let (a, b) = (direct.step(t), off.step(t));
+            assert_eq!((a.x_mm, a.y_mm, a.phi_rad), (b.x_mm, b.y_mm, b.phi_rad));
+            t += 0.02;
+        }
+        assert_eq!(off.status(t).state, planner_state::RUNNING);
+        assert_eq!(off.status(t).run_id, 4);
+    }
+
+    #[test]
+    fn a_new_program_waits_for_the_running_one_and_a_stale_plan_is_refused() {
+        let cmd = simple_command(command_kind::RUN, program_id::CIRCLE, 1);
+        let mut s = InterpolatorStep::new(InterimPathSource::new(), Pose::default());
+        s.command(&cmd).unwrap();
+        s.step(0.0);
+        s.step(0.02);
+        assert_eq!(s.command(&cmd), Err(CommandError::Busy(1)));
+        let run = prepare_run(InterimPathSource::new(), &cmd, Pose::default()).unwrap();
+        assert!(matches!(s.install(run).0, Err(CommandError::Busy(1))));
+        // planned from home, but the robot now holds elsewhere
+        let mut idle = InterpolatorStep::new(InterimPathSource::new(), Pose::new(5.0, 0.0, 0.0));
+        let run = prepare_run(InterimPathSource::new(), &cmd, Pose::default()).unwrap();
+        assert!(matches!(idle.install(run).0, Err(CommandError::Stale(_))));
+        idle.refuse(9);
+        assert_eq!(idle.status(0.0).state, planner_state::REFUSED);
+        assert_eq!(idle.status(0.0).run_id, 9);
+        // only RUN commands are planned
+        let pause = simple_command(command_kind::PAUSE, 0, 1);
+        assert!(prepare_run(InterimPathSource::new(), &pause, Pose::default()).is_err());
     }
 
     #[test]

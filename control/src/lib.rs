@@ -33,7 +33,8 @@ pub use drive::{
 pub use driver_step::{DriverStep, STALE_CYCLES};
 pub use ik::IkStep;
 pub use interpolator::{
-    command_of_moves, moves_of, simple_command, CommandError, InterpolatorStep,
+    command_of_moves, moves_of, prepare_run, simple_command, CommandError, InterpolatorStep,
+    PreparedRun,
 };
 pub use planned::{MotionLimits, PlannerSource};
 pub use plant_drive::{plant_backend, PlantDrive, PlantSensor};

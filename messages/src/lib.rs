@@ -331,7 +331,7 @@ pub struct Heartbeat {
     pub stale_inputs: u64,
     /// Cycle (work) time percentiles, ns: p50, p99, max.
     pub cycle_ns: [u64; 3],
-    /// Wake-up jitter percentiles (|actual - expected wake|), ns: p50, p99, max.
+    /// Wake-up latency percentiles (actual wake - release of the cycle), ns: p50, p99, max.
     pub jitter_ns: [u64; 3],
 }
 
@@ -422,6 +422,8 @@ pub mod planner_state {
     pub const STOPPED: u32 = 4;
     /// The command was refused (bad program).
     pub const REFUSED: u32 = 5;
+    /// The program of a RUN command is being planned and checked (off the cycle).
+    pub const PLANNING: u32 = 6;
 }
 
 /// Interpolator -> supervisor status (every cycle's state change and every heartbeat).

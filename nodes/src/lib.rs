@@ -11,11 +11,13 @@ pub mod ports;
 pub mod protocol;
 pub mod realtime;
 pub mod stats;
+pub mod timer;
 
 pub use args::CommonArgs;
 pub use ports::{iox_config, ChainNode};
 pub use protocol::ProtocolGuard;
 pub use stats::CycleStats;
+pub use timer::{PeriodicTimer, Tick};
 
 /// Exit code of a process that refused to connect because of a protocol version mismatch.
 pub const EXIT_VERSION_MISMATCH: i32 = 3;

@@ -1,4 +1,4 @@
-//! Cycle statistics (HDR histograms of cycle time and wake-up jitter, deadline misses) and the
+//! Cycle statistics (HDR histograms of cycle time and wake-up latency after the release, deadline misses) and the
 //! heartbeat that reports them.
 
 use hdrhistogram::Histogram;
@@ -38,16 +38,22 @@ impl CycleStats {
         }
     }
 
-    /// Records one cycle: its work time and its wake-up jitter (ns). A cycle misses its deadline
-    /// when the work takes longer than the period or the wake-up is late by more than half a
-    /// period.
-    pub fn record(&mut self, work_ns: u64, jitter_ns: u64) {
+    /// Records one cycle: its work time and its wake-up latency (ns): how late the process
+    /// woke after the cycle's release (its timer tick, or the upstream publication that woke
+    /// it). A cycle misses its deadline when it finishes more than a period after its release
+    /// (the implicit deadline of a periodic task: latency + work > period).
+    pub fn record(&mut self, work_ns: u64, latency_ns: u64) {
         self.cycles += 1;
         self.cycle.saturating_record(work_ns.max(1));
-        self.jitter.saturating_record(jitter_ns.max(1));
-        if work_ns > self.period_ns || jitter_ns > self.period_ns / 2 {
+        self.jitter.saturating_record(latency_ns.max(1));
+        if work_ns + latency_ns > self.period_ns {
             self.misses += 1;
         }
+    }
+
+    /// Counts periods that expired without being served (each is a deadline miss).
+    pub fn missed_periods(&mut self, n: u64) {
+        self.misses += n;
     }
 
     /// Counts a cycle with stale or missing input.
@@ -95,7 +101,7 @@ impl CycleStats {
         let j = Self::pct(&self.jitter);
         format!(
             "{}: {} cycles, {} deadline misses, {} stale inputs; cycle p50/p99/max {:.1}/{:.1}/{:.1} us; \
-             jitter p50/p99/max {:.1}/{:.1}/{:.1} us",
+             wake-up latency p50/p99/max {:.1}/{:.1}/{:.1} us",
             self.kind.name(),
             self.cycles,
             self.misses,

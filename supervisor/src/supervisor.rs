@@ -519,7 +519,7 @@ impl Supervisor {
             let h = &p.hb;
             out.push_str(&format!(
                 "process {}: {} pid {}; restarts {}; deadline misses {} over {} cycles; cycle \
-                 p50/p99/max {:.0}/{:.0}/{:.0} us; jitter p50/p99/max {:.0}/{:.0}/{:.0} us; \
+                 p50/p99/max {:.0}/{:.0}/{:.0} us; wake-up latency p50/p99/max {:.0}/{:.0}/{:.0} us; \
                  stale inputs {}; holding {}\n",
                 p.name(),
                 if p.gave_up {

@@ -22,8 +22,8 @@ use pcr_control::{
 };
 use pcr_kinematics::{Pose, Robot};
 use pcr_messages::{
-    command_kind, monotonic_ns, program_id, services as s, Command, DriverStateMsg, Heartbeat,
-    JointSetpoint, TaskSetpoint, PROTOCOL_VERSION,
+    command_kind, monotonic_ns, planner_state, program_id, services as s, Command, DriverStateMsg,
+    Heartbeat, JointSetpoint, PlannerStatus, TaskSetpoint, PROTOCOL_VERSION,
 };
 use pcr_nodes::ChainNode;
 use pcr_robot::RobotConfig;
@@ -47,6 +47,9 @@ struct Args {
     /// SCHED_FIFO priority for every process of both transports (0 = normal scheduling).
     #[arg(long, default_value_t = 0)]
     rt_priority: i32,
+    /// Lock every chain process's memory (mlockall), as a real-time deployment would.
+    #[arg(long)]
+    mlockall: bool,
     /// Skip the UDS baseline.
     #[arg(long)]
     no_uds: bool,
@@ -214,6 +217,8 @@ fn bench_iceoryx2_in(a: &Args, period_ns: u64, prefix: &str) -> Result<(Hists, u
         "--rt-priority".into(),
         a.rt_priority.to_string(),
     ];
+    let lock = a.mlockall.then(|| "--mlockall".to_string());
+    let common: Vec<String> = common.into_iter().chain(lock).collect();
     let mut kids = Kids(Vec::new());
     for b in ["pcr-driver", "pcr-ik", "pcr-planner"] {
         kids.0.push(
@@ -230,6 +235,8 @@ fn bench_iceoryx2_in(a: &Args, period_ns: u64, prefix: &str) -> Result<(Hists, u
     let listener = cn.listener(s::DRIVER_STATE)?;
     let sub_hb = cn.subscriber::<Heartbeat>(s::HEARTBEAT)?;
     let pub_cmd = cn.publisher::<Command>(s::COMMAND)?;
+    let sub_status = cn.subscriber::<PlannerStatus>(s::STATUS)?;
+    let mut planner_busy = false;
     let mut h = Hists::new();
     let mut misses = std::collections::HashMap::new();
     let ws = WaitSetBuilder::new()
@@ -265,9 +272,21 @@ fn bench_iceoryx2_in(a: &Args, period_ns: u64, prefix: &str) -> Result<(Hists, u
             while let Ok(Some(smp)) = sub_hb.receive() {
                 misses.insert(smp.pid, smp.deadline_misses);
             }
-            // (Re)start the paper program so that the IK works on a moving target.
-            run_id += 1;
-            if run_id % 40 == 1 {
+            // (Re)start the paper program whenever the planner is free, so that the IK works
+            // on a moving target.
+            while let Ok(Some(smp)) = sub_status.receive() {
+                let st = smp.payload();
+                // (IDLE: the planner never got a command, e.g. sent before it subscribed.)
+                if st.run_id == run_id || st.state == planner_state::IDLE {
+                    planner_busy = matches!(
+                        st.state,
+                        planner_state::RUNNING | planner_state::PAUSED | planner_state::PLANNING
+                    );
+                }
+            }
+            if !planner_busy {
+                run_id += 1;
+                planner_busy = true;
                 let _ =
                     pub_cmd.send_copy(simple_command(command_kind::RUN, program_id::PAPER, run_id));
             }
@@ -396,10 +415,8 @@ fn bench_uds(a: &Args, period_ns: u64) -> Result<(Hists, u64)> {
     let mut sent = 0u64;
     let total = a.cycles + 100;
     let mut t_cmd = 0u64;
-    let mut next_cmd = 0u64;
     while sent < total {
-        if sent == next_cmd {
-            next_cmd += 10_000;
+        if interp.can_start().is_ok() {
             t_cmd += 1;
             interp
                 .command(&simple_command(
