@@ -73,7 +73,7 @@ impl IkStep {
             steps: self.last_steps,
             enable: 1,
             kappa: self.last_kappa,
-            planned: [sp.x_mm, sp.y_mm, sp.phi_rad],
+            planned: sp.nominal,
             seq: sp.seq,
             run_id: sp.run_id,
             flags: sp.flags,

@@ -379,6 +379,7 @@ impl<S: SetpointSource> InterpolatorStep<S> {
             x_mm: p.x + self.offset[0],
             y_mm: p.y + self.offset[1],
             phi_rad: p.phi + self.offset[2],
+            nominal: [p.x, p.y, p.phi],
             seq: self.seq,
             run_id: self.run_id,
             flags,

@@ -10,7 +10,7 @@
 //! * [`IkStep`] (pcr-kinematics),
 //! * [`DriverStep`] around any [`pcr_driver::Driver`] and a [`PoseSensor`] (interim plant:
 //!   [`IdealDrive`] + [`FkPoseSensor`]; the simulated plant implements the same two traits),
-//! * [`CorrectionStep`] (placeholder pass-through until the mocap bridge exists),
+//! * [`CorrectionStep`] (latency-compensated integral correction from the measured pose),
 //! * [`Recorder`] (the recording format) and [`Accuracy`] (planned vs measured).
 
 pub mod accuracy;
@@ -26,7 +26,7 @@ pub mod runtime;
 pub mod setpoint;
 
 pub use accuracy::Accuracy;
-pub use correction::{measured_of, CorrectionStep};
+pub use correction::{measured_of, CorrectionConfig, CorrectionConfigError, CorrectionStep};
 pub use drive::{
     max_step_rate, safety_stack, FkPoseSensor, IdealDrive, NoPoseSensor, PoseSensor, SafeDriver,
 };

@@ -2,7 +2,7 @@
 //! than real time and deterministic (same inputs, same outputs, bit for bit).
 
 use crate::accuracy::Accuracy;
-use crate::correction::{measured_of, CorrectionStep};
+use crate::correction::CorrectionStep;
 use crate::drive::{max_step_rate, safety_stack, FkPoseSensor, IdealDrive, PoseSensor, SafeDriver};
 use crate::driver_step::DriverStep;
 use crate::ik::IkStep;
@@ -56,7 +56,7 @@ pub struct InProcessChain<S, D, P> {
 }
 
 /// The chain on the interim parts: [`InterimPathSource`], [`IdealDrive`] in the safety stack,
-/// [`FkPoseSensor`], pass-through correction.
+/// [`FkPoseSensor`], correction with gain 0 (error reported only).
 pub type InterimChain = InProcessChain<InterimPathSource, SafeDriver<IdealDrive>, FkPoseSensor>;
 
 impl InterimChain {
@@ -143,6 +143,12 @@ impl<S: SetpointSource, D: Driver, P: PoseSensor> InProcessChain<S, D, P> {
         }
     }
 
+    /// The chain with another correction step (e.g. a non-zero gain).
+    pub fn with_correction(mut self, correction: CorrectionStep) -> Self {
+        self.correction = correction;
+        self
+    }
+
     /// Simulated time, s.
     pub fn time_s(&self) -> f64 {
         self.t_s
@@ -157,7 +163,7 @@ impl<S: SetpointSource, D: Driver, P: PoseSensor> InProcessChain<S, D, P> {
         let state = self
             .driver
             .step(t, if drop_setpoint { None } else { Some(&joint) })?;
-        let corr = self.correction.step(&measured_of(&state), &state.planned);
+        let corr = self.correction.step_state(&state);
         self.interp.set_correction(&corr);
         self.t_s += self.period_s;
         Ok(CycleOutput { task, joint, state })

@@ -1,7 +1,7 @@
 //! The in-process runtime on the real parts: the planner's jerk-limited paths and the simulated
 //! plant (elastica statics, stepper, backlash, friction, capture noise).
 
-use pcr_control::{simple_command, SimChain};
+use pcr_control::{simple_command, CorrectionConfig, CorrectionStep, SimChain};
 use pcr_messages::{command_kind, program_id};
 use pcr_plant::PlantConfig;
 use pcr_robot::RobotConfig;
@@ -38,4 +38,46 @@ fn the_prototype_plant_shows_the_model_error_the_calibration_must_remove() {
     // of millimetres, far above the ideal plant's step quantisation, but the run completes.
     assert!(acc.n > 300, "{acc}");
     assert!(acc.rms_pos_mm() > 0.3 && acc.max_pos_mm < 20.0, "{acc}");
+}
+
+fn run_corrected(plant: &str, program: u32, gain: f64) -> pcr_control::Accuracy {
+    let robot = RobotConfig::load(ROBOT).unwrap();
+    let cfg = PlantConfig::load(plant).unwrap();
+    let c = SimChain::simulated(&robot, &cfg, 0.02).unwrap();
+    let mut c = c.with_correction(CorrectionStep::new(CorrectionConfig {
+        gain,
+        limit_mm: 5.0,
+        latency_s: cfg.capture.latency_s,
+    }));
+    c.run(
+        &simple_command(command_kind::RUN, program, 1),
+        120.0,
+        |_| {},
+    )
+    .unwrap()
+}
+
+#[test]
+fn the_capture_correction_removes_most_of_the_prototypes_model_error() {
+    let open = run(PROTO, program_id::CIRCLE);
+    let closed = run_corrected(PROTO, program_id::CIRCLE, 0.3);
+    println!("open loop {open}\ncorrected (gain 0.3) {closed}");
+    // The slowly varying model error goes; step quantisation, backlash reversals and capture
+    // noise stay.
+    assert!(closed.n > 300, "{closed}");
+    assert!(
+        closed.mean_pos_mm() < open.mean_pos_mm() / 3.0,
+        "{open}\n{closed}"
+    );
+    assert!(
+        closed.max_pos_mm < open.max_pos_mm / 2.0,
+        "{open}\n{closed}"
+    );
+    assert!(
+        closed.rms_phi_deg() < open.rms_phi_deg() / 3.0,
+        "{open}\n{closed}"
+    );
+    // gain 0 reports the error and changes nothing
+    let zero = run_corrected(PROTO, program_id::CIRCLE, 0.0);
+    assert_eq!(zero.mean_pos_mm(), open.mean_pos_mm());
 }

@@ -18,7 +18,7 @@
 use iceoryx2::prelude::ZeroCopySend;
 
 /// Version of the chain's protocol (message layouts and service names). Bump on any change.
-pub const PROTOCOL_VERSION: u32 = 1;
+pub const PROTOCOL_VERSION: u32 = 2;
 
 /// The unversioned service on which every process announces its protocol version.
 pub const PROTOCOL_SERVICE: &str = "pcr/protocol";
@@ -181,6 +181,9 @@ pub struct TaskSetpoint {
     pub y_mm: f64,
     /// Platform orientation, rad.
     pub phi_rad: f64,
+    /// The planned pose before the motion-capture correction (x mm, y mm, phi rad): what the
+    /// path accuracy is measured against. Equal to the commanded pose without correction.
+    pub nominal: [f64; 3],
     /// Cycle counter of the interpolator (strictly increasing).
     pub seq: u64,
     /// Program run id (0 = none).
@@ -453,9 +456,12 @@ mod tests {
 
     #[test]
     fn service_names_carry_the_version() {
-        assert_eq!(service_name(services::HEARTBEAT), "pcr/v1/heartbeat");
+        assert_eq!(
+            service_name(services::HEARTBEAT),
+            format!("pcr/v{PROTOCOL_VERSION}/heartbeat")
+        );
         assert_ne!(
-            service_name_for(2, services::TASK_SETPOINT),
+            service_name_for(PROTOCOL_VERSION + 1, services::TASK_SETPOINT),
             service_name(services::TASK_SETPOINT)
         );
     }

@@ -347,13 +347,13 @@ fn a_version_mismatched_process_is_refused() {
     }
     let o = Command::new(bin_dir().join("pcr-ik"))
         .current_dir(workspace())
-        .args(["--prefix", &chain.prefix, "--protocol-version", "2"])
+        .args(["--prefix", &chain.prefix, "--protocol-version", "99"])
         .output()
         .unwrap();
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(3), "{stderr}");
     assert!(stderr.contains("protocol version mismatch"), "{stderr}");
-    assert!(stderr.contains("v2") && stderr.contains("v1"), "{stderr}");
+    assert!(stderr.contains("v99") && stderr.contains("v2"), "{stderr}");
     // The chain is unaffected.
     assert!(chain.ctl("status").starts_with("state: ready"));
     // SIGINT (Ctrl-C) shuts the chain down cleanly.
@@ -496,11 +496,11 @@ fn a_killed_planner_aborts_the_run_and_the_robot_holds() {
 #[test]
 fn a_mismatched_binary_started_by_the_supervisor_is_not_restarted() {
     let _g = lock();
-    // The IK of "another revision": it speaks protocol v2.
+    // The IK of "another revision": it speaks protocol v99.
     let chain = Chain::new("mism", "heartbeat_timeout_ms = 2000.0", "");
     let text = std::fs::read_to_string(&chain.config).unwrap().replace(
         "name = \"ik\"\n",
-        "name = \"ik\"\nargs = [\"--protocol-version\", \"2\"]\n",
+        "name = \"ik\"\nargs = [\"--protocol-version\", \"99\"]\n",
     );
     std::fs::write(&chain.config, text).unwrap();
     let (mut sup, _out, err) = chain.supervisor(&["--run", "paper"]);
