@@ -277,3 +277,60 @@ fn bad_input_is_an_error() {
     }
     assert_eq!(r, Err(CompositeError::TooManySegments));
 }
+
+#[test]
+fn random_polylines_with_blends_and_speeds_respect_every_limit() {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+    for case in 0..40 {
+        let n = rng.random_range(2..12);
+        let mut v = vec![Pose::new(0.0, 0.0, 0.0)];
+        for _ in 1..n {
+            let last = *v.last().unwrap();
+            v.push(Pose::new(
+                last.x + rng.random_range(-20.0..20.0),
+                last.y + rng.random_range(-20.0..20.0),
+                if rng.random_bool(0.2) {
+                    last.phi + rng.random_range(-0.2..0.2)
+                } else {
+                    last.phi
+                },
+            ));
+        }
+        let blend = if rng.random_bool(0.3) {
+            0.0
+        } else {
+            rng.random_range(0.5..10.0)
+        };
+        let Ok(path) = CompositePath::polyline(&v, blend) else {
+            continue;
+        };
+        // Some arcs at the end, with their own speeds.
+        let mut path = path;
+        for _ in 0..rng.random_range(0..3) {
+            let e = path.end();
+            let (cx, cy) = (
+                e.x + rng.random_range(-10.0..10.0),
+                e.y + rng.random_range(-10.0..10.0),
+            );
+            let speed = rng.random_bool(0.5).then(|| rng.random_range(2.0..40.0));
+            let _ = path.arc_around(cx, cy, rng.random_range(-4.0..4.0), e.phi, speed);
+        }
+        let l = CompositeLimits {
+            vmax: rng.random_range(5.0..80.0),
+            amax: rng.random_range(50.0..500.0),
+            jmax: rng.random_range(300.0..5000.0),
+        };
+        let m = CompositeMotion::plan(&path, &l).unwrap_or_else(|e| panic!("case {case}: {e}"));
+        let samples = check_limits(&m);
+        let last = samples.last().unwrap().1;
+        assert_eq!(last.pose, path.end(), "case {case}");
+        // At every corner the planned speed is zero; with smooth junctions it is not.
+        for j in 1..path.len() {
+            let vj = m.speed_at_segment_start(j);
+            if !path.junction_is_smooth(j) {
+                assert!(vj < 1e-6, "case {case} junction {j}: {vj}");
+            }
+        }
+    }
+}
