@@ -121,6 +121,12 @@ enum Shape {
         /// Platform orientation, degrees.
         #[arg(long = "phi-deg", default_value_t = 0.0, allow_hyphen_values = true)]
         phi_deg: f64,
+        /// Round every corner by a tangent arc of this radius (mm) and plan the whole square,
+        /// with its approach from and return to --from, as one jerk-limited composite motion
+        /// that keeps its speed through the corners (instead of rest-to-rest sides). The square
+        /// then starts in the middle of its lower side.
+        #[arg(long, allow_hyphen_values = true)]
+        blend_radius: Option<f64>,
     },
     /// A straight line to a pose.
     Line {
@@ -287,6 +293,7 @@ fn motions(a: &Args, from: Pose) -> Result<Vec<Motion>> {
             cx,
             cy,
             phi_deg,
+            ..
         } => {
             for (k, p) in square_sides(*cx, *cy, *side, phi_deg.to_radians())?
                 .into_iter()
@@ -407,7 +414,15 @@ pub fn run(a: Args) -> Result<()> {
     let cfg = RobotConfig::load(&a.robot)?;
     let robot = Robot::new(&cfg).with_context(|| format!("robot {}", a.robot))?;
     let from = parse_pose(&a.from, "--from")?;
-    if matches!(a.shape, Shape::Program { .. } | Shape::Joint { .. }) {
+    if matches!(
+        a.shape,
+        Shape::Program { .. }
+            | Shape::Joint { .. }
+            | Shape::Square {
+                blend_radius: Some(_),
+                ..
+            }
+    ) {
         return run_timeline(&a, &cfg, &robot, from);
     }
     let motions = motions(&a, from)?;
@@ -935,7 +950,61 @@ fn run_timeline(a: &Args, cfg: &RobotConfig, robot: &Robot, from: Pose) -> Resul
             tl.steps = Some(q0);
             tl.joint("joint move", target)?;
         }
-        _ => bail!("internal: not a program or joint move"),
+        Shape::Square {
+            side,
+            speed,
+            cx,
+            cy,
+            phi_deg,
+            blend_radius: Some(r),
+        } => {
+            if !(side.is_finite() && *side > 0.0) {
+                bail!("--side must be a length > 0 mm, got {side}");
+            }
+            if !(r.is_finite() && *r >= 0.0) {
+                bail!("--blend-radius must be a radius >= 0 mm, got {r}");
+            }
+            if !(speed.is_finite() && *speed > 0.0) {
+                bail!("--speed must be > 0 mm/s, got {speed}");
+            }
+            let (h, phi) = (side / 2.0, phi_deg.to_radians());
+            let line = |x: f64, y: f64, phi: f64| program::Step::Line {
+                to: [x, y],
+                phi: Some(phi),
+                speed: None,
+                blend_radius: None,
+            };
+            let mut steps = Vec::new();
+            let start = Pose::new(*cx, cy - h, phi);
+            if start.max_diff(&from) > 1e-9 {
+                steps.push(line(start.x, start.y, phi));
+            }
+            for (x, y) in [
+                (cx + h, cy - h),
+                (cx + h, cy + h),
+                (cx - h, cy + h),
+                (cx - h, cy - h),
+                (*cx, cy - h),
+            ] {
+                steps.push(line(x, y, phi));
+            }
+            if start.max_diff(&from) > 1e-9 {
+                steps.push(line(from.x, from.y, from.phi));
+            }
+            let steps: Vec<_> = steps.into_iter().enumerate().collect();
+            tl.file = "square".into();
+            tl.path(
+                &steps,
+                &program::PathLimits {
+                    speed: *speed,
+                    acceleration: a.amax,
+                    jerk: a.jmax,
+                    blend_radius: *r,
+                    rotation_radius: rot_radius,
+                },
+            )?;
+        }
+        _ => bail!("internal: not a program, joint move or blended square"),
     }
     let (rows, limits) = timeline_rows(robot, &tl.items, start, rot_radius)?;
     write_csv(a.output.as_deref(), &rows)?;

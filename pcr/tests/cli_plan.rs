@@ -326,3 +326,45 @@ fn program_and_joint_errors_name_the_file_key_and_segment() {
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("--steps"));
 }
+
+#[test]
+fn a_blended_square_keeps_moving_through_its_corners() {
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("sq.csv");
+    let o = pcr(&[
+        "plan",
+        "square",
+        "--side",
+        "50",
+        "--speed",
+        "50",
+        "--blend-radius",
+        "8",
+        "--output",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (_, rows) = read_rows(&out);
+    let n = rows.len();
+    // From home and back to home, never at rest in between (approach, corners, return).
+    assert_eq!(&rows[0][1..4], &[0.0, 0.0, 0.0]);
+    assert!(rows[n - 1][1].abs() < 1e-9 && rows[n - 1][2].abs() < 1e-9);
+    for r in &rows[25..n - 25] {
+        assert!(r[4] > 35.0 && r[4] <= 50.0 + 1e-9, "{r:?}");
+    }
+    // The corners are rounded: the square's corner points themselves are never visited.
+    assert!(rows
+        .iter()
+        .all(|r| (r[1] - 25.0).abs() > 1.0 || (r[2] - 25.0).abs() > 1.0));
+    let o = pcr(&[
+        "plan",
+        "square",
+        "--side",
+        "50",
+        "--speed",
+        "50",
+        "--blend-radius",
+        "-1",
+    ]);
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--blend-radius"));
+}
