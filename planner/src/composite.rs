@@ -1038,6 +1038,31 @@ mod tests {
     }
 
     #[test]
+    fn a_blend_with_a_changing_orientation_rate_is_not_smooth() {
+        // The first line rotates, the second does not: the tangents differ in the combined
+        // metric even after blending, so the motion stops at the blend arc's ends.
+        let v = [
+            Pose::new(0.0, 0.0, 0.0),
+            Pose::new(10.0, 0.0, 0.2),
+            Pose::new(10.0, 10.0, 0.2),
+        ];
+        let c = CompositePath::polyline(&v, 2.0).unwrap();
+        assert_eq!(c.len(), 3);
+        assert!(!c.junction_is_smooth(1));
+        let m = CompositeMotion::plan(
+            &c,
+            &CompositeLimits {
+                vmax: 20.0,
+                amax: 100.0,
+                jmax: 1000.0,
+            },
+        )
+        .unwrap();
+        assert_eq!(m.speed_at_segment_start(1), 0.0);
+        assert!(m.sample(1e9).pose.max_diff(&v[2]) == 0.0);
+    }
+
+    #[test]
     fn too_large_radius_is_reduced_to_half_the_shorter_line() {
         let v = [
             Pose::new(0.0, 0.0, 0.0),
