@@ -11,6 +11,17 @@ fn err<E: std::fmt::Debug>(e: E) -> anyhow::Error {
 
 /// `rows` are (t s, x mm, y mm, speed mm/s) every 20 ms.
 pub fn plan_svg(path: &str, robot: &Robot, rows: &[(f64, f64, f64, f64)]) -> Result<()> {
+    plan_svg_with_limit(path, robot, rows, &[])
+}
+
+/// As [`plan_svg`], with the speed limit along the path (mm/s, one per row; NaN where there is
+/// none, e.g. dwells and joint moves) drawn in grey behind the speed.
+pub fn plan_svg_with_limit(
+    path: &str,
+    robot: &Robot,
+    rows: &[(f64, f64, f64, f64)],
+    limit: &[f64],
+) -> Result<()> {
     pcr_figures::init();
     let root = SVGBackend::new(path, (1200, 560)).into_drawing_area();
     root.fill(&WHITE).map_err(err)?;
@@ -52,9 +63,19 @@ pub fn plan_svg(path: &str, robot: &Robot, rows: &[(f64, f64, f64, f64)]) -> Res
     )
     .map_err(err)?;
     let tmax = rows.last().map_or(1.0, |r| r.0).max(1e-3);
-    let vmax = rows.iter().map(|r| r.3).fold(1.0, f64::max) * 1.15;
+    let vmax = rows
+        .iter()
+        .map(|r| r.3)
+        .chain(limit.iter().copied().filter(|v| v.is_finite()))
+        .fold(1.0, f64::max)
+        * 1.15;
+    let caption = if limit.is_empty() {
+        "Speed along the path (20 ms setpoints)"
+    } else {
+        "Speed along the path and its limit (grey), 20 ms"
+    };
     let mut c2 = ChartBuilder::on(&right)
-        .caption("Speed along the path (20 ms setpoints)", (FONT_FAMILY, 18))
+        .caption(caption, (FONT_FAMILY, 18))
         .margin(15)
         .x_label_area_size(40)
         .y_label_area_size(60)
@@ -66,6 +87,23 @@ pub fn plan_svg(path: &str, robot: &Robot, rows: &[(f64, f64, f64, f64)]) -> Res
         .label_style((FONT_FAMILY, 13))
         .draw()
         .map_err(err)?;
+    // The limit in runs of finite values (it is undefined during dwells and joint moves).
+    let mut run: Vec<(f64, f64)> = Vec::new();
+    for (r, l) in rows
+        .iter()
+        .zip(limit)
+        .chain(std::iter::once((&(0.0, 0.0, 0.0, 0.0), &f64::NAN)))
+    {
+        if l.is_finite() {
+            run.push((r.0, *l));
+        } else if !run.is_empty() {
+            c2.draw_series(LineSeries::new(
+                run.drain(..),
+                RGBColor(160, 160, 160).stroke_width(3),
+            ))
+            .map_err(err)?;
+        }
+    }
     c2.draw_series(LineSeries::new(
         rows.iter().map(|r| (r.0, r.3)),
         PLANNED.stroke_width(2),

@@ -1,7 +1,11 @@
 //! Planning for the 3-FbRR robot: the jerk-limited trajectory [`profiler`], task-space
-//! [`path`]s with [`speed`] profiles along them, and the 20 ms [`interpolator`].
+//! [`path`]s with [`speed`] profiles along them, [`composite`] paths (lines and arcs traversed
+//! without stopping at smooth junctions), synchronised [`joint`]-space moves of the motors, and
+//! the 20 ms [`interpolator`].
 
+pub mod composite;
 pub mod interpolator;
+pub mod joint;
 pub mod path;
 pub mod profiler;
 pub mod speed;
