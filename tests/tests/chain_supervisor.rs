@@ -248,7 +248,7 @@ fn sigkill_mid_run_restarts_the_process_and_the_motion_resumes() {
         wait_for(
             &err,
             "ik failed (exited: signal: 9",
-            Duration::from_secs(5),
+            Duration::from_secs(30),
             &mut e
         ),
         "{e:?}"
@@ -390,10 +390,10 @@ fn repeated_failures_escalate_to_a_safe_stop() {
             std::thread::sleep(Duration::from_millis(50));
         };
         kill(pid, libc::SIGKILL);
-        assert!(wait_for(&err, "ik failed", Duration::from_secs(5), &mut e));
+        assert!(wait_for(&err, "ik failed", Duration::from_secs(30), &mut e));
     }
     assert!(
-        wait_for(&err, "SAFE STOP", Duration::from_secs(5), &mut e),
+        wait_for(&err, "SAFE STOP", Duration::from_secs(30), &mut e),
         "{e:?}"
     );
     let st = wait_exit(&mut sup, Duration::from_secs(30));
@@ -453,7 +453,7 @@ fn a_killed_planner_aborts_the_run_and_the_robot_holds() {
     let planner = chain.pid_of("planner").expect("planner pid");
     kill(planner, libc::SIGKILL);
     assert!(
-        wait_for(&err, "run 1 aborted", Duration::from_secs(5), &mut e),
+        wait_for(&err, "run 1 aborted", Duration::from_secs(30), &mut e),
         "{e:?}"
     );
     let st = wait_exit(&mut sup, Duration::from_secs(30));
