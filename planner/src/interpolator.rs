@@ -1,11 +1,14 @@
 //! The 20 ms interpolator: turns a queue of motion commands (a path and speed limits each) into
 //! one task-space setpoint per cycle, and can stop with a jerk-limited brake on request.
 //!
-//! No I/O and no allocation: the queue is a fixed ring buffer, paths and profiles are `Copy`.
-//! Speed profiles are planned when a command is pushed, so [`Interpolator::step`] only evaluates
-//! (a stop request plans one velocity-interface profile of one DoF, also allocation-free).
+//! No I/O and no allocation in the cycle: the queue is a fixed ring buffer; single paths and
+//! their profiles are `Copy`, composite motions ([`CompositeMotion`], planned with continuous
+//! speed through smooth junctions) are boxed when pushed. Speed profiles are planned when a
+//! command is pushed, so [`Interpolator::step`] only evaluates (a stop request plans one
+//! velocity-interface profile of one DoF, also allocation-free).
 //! Workspace and kinematic checks are not made here (they belong to the kinematics crate).
 
+use crate::composite::CompositeMotion;
 use crate::path::{Path, Pose};
 use crate::profiler::{step1::Step1, ControlInterface, Limits, Profile, State};
 use crate::speed::{SpeedError, SpeedLimits, SpeedProfile};
@@ -75,18 +78,94 @@ pub struct Setpoint {
     pub phase: Phase,
 }
 
-#[derive(Clone, Copy, Debug)]
+/// A queued or active motion: one path with its speed profile, or a composite.
+#[derive(Clone, Debug)]
+enum Motion {
+    Single {
+        path: Path,
+        profile: SpeedProfile,
+        limits: SpeedLimits,
+    },
+    Composite(Box<CompositeMotion>),
+}
+
+impl Motion {
+    fn duration(&self) -> f64 {
+        match self {
+            Motion::Single { profile, .. } => profile.duration(),
+            Motion::Composite(c) => c.duration(),
+        }
+    }
+
+    fn length(&self) -> f64 {
+        match self {
+            Motion::Single { path, .. } => path.length(),
+            Motion::Composite(c) => c.path().length(),
+        }
+    }
+
+    fn end(&self) -> Pose {
+        match self {
+            Motion::Single { path, .. } => path.end(),
+            Motion::Composite(c) => c.path().end(),
+        }
+    }
+
+    /// Path length, speed and path acceleration at time `t` of the motion.
+    fn state(&self, t: f64) -> (f64, f64, f64) {
+        match self {
+            Motion::Single { profile, .. } => {
+                let st = profile.at(t);
+                (st.p, st.v, st.a)
+            }
+            Motion::Composite(c) => {
+                let st = c.sample(t);
+                (st.s, st.speed, st.acceleration)
+            }
+        }
+    }
+
+    /// Pose and unit tangent (d pose / ds) at path length `s`.
+    fn at_length(&self, s: f64) -> (Pose, Pose) {
+        match self {
+            Motion::Single { path, .. } => path.sample(s),
+            Motion::Composite(c) => c.path().sample(s),
+        }
+    }
+
+    /// Trapezoidal (infinite-jerk) speed model, and the motion's own jerk limit.
+    fn jerk(&self) -> Option<f64> {
+        match self {
+            Motion::Single {
+                limits: SpeedLimits::JerkLimited { jmax, .. },
+                ..
+            } => Some(*jmax),
+            Motion::Single { .. } => None,
+            Motion::Composite(c) => Some(c.limits().jmax),
+        }
+    }
+
+    fn trapezoidal_deceleration(&self) -> Option<f64> {
+        match self {
+            Motion::Single {
+                profile: SpeedProfile::Trapezoidal { a, .. },
+                ..
+            } => Some(*a),
+            _ => None,
+        }
+    }
+}
+
+#[derive(Clone, Debug)]
 struct Active {
-    path: Path,
-    profile: SpeedProfile,
-    limits: SpeedLimits,
+    motion: Motion,
     /// Time in the motion, s.
     t: f64,
 }
 
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 struct Stop {
-    path: Path,
+    motion: Motion,
     /// Path length at the start of the stop.
     s0: f64,
     profile: Profile,
@@ -96,7 +175,7 @@ struct Stop {
 /// The 20 ms setpoint generator.
 #[derive(Clone, Debug)]
 pub struct Interpolator {
-    queue: [Option<(Path, SpeedProfile, SpeedLimits)>; QUEUE_CAPACITY],
+    queue: [Option<Motion>; QUEUE_CAPACITY],
     head: usize,
     len: usize,
     active: Option<Active>,
@@ -118,7 +197,7 @@ impl Interpolator {
             }
         }
         Ok(Interpolator {
-            queue: [None; QUEUE_CAPACITY],
+            queue: std::array::from_fn(|_| None),
             head: 0,
             len: 0,
             active: None,
@@ -133,24 +212,45 @@ impl Interpolator {
     /// Queues a motion (plans its speed profile). The path must start at the end of the last
     /// queued motion (or the held pose), within 1e-6 mm / rad.
     pub fn push(&mut self, cmd: MotionCommand) -> Result<(), InterpolatorError> {
+        self.check_push(cmd.path.start())?;
+        let profile = SpeedProfile::plan(cmd.path.length(), &cmd.limits)?;
+        self.enqueue(Motion::Single {
+            path: cmd.path,
+            profile,
+            limits: cmd.limits,
+        });
+        Ok(())
+    }
+
+    /// Queues a composite motion (planned already, with continuous speed through its smooth
+    /// junctions; see [`CompositeMotion::plan`]). It must start at the end of the last queued
+    /// motion (or the held pose). Moves the motion into a box: call between cycles.
+    pub fn push_composite(&mut self, motion: CompositeMotion) -> Result<(), InterpolatorError> {
+        self.check_push(motion.path().start())?;
+        self.enqueue(Motion::Composite(Box::new(motion)));
+        Ok(())
+    }
+
+    fn check_push(&self, start: Pose) -> Result<(), InterpolatorError> {
         if self.stop.is_some() {
             return Err(InterpolatorError::Stopping);
         }
         if self.len == QUEUE_CAPACITY {
             return Err(InterpolatorError::QueueFull);
         }
-        let start = cmd.path.start();
         if start.max_diff(&self.tail) > 1e-6 {
             return Err(InterpolatorError::Discontinuous {
                 start,
                 expected: self.tail,
             });
         }
-        let profile = SpeedProfile::plan(cmd.path.length(), &cmd.limits)?;
-        self.queue[(self.head + self.len) % QUEUE_CAPACITY] = Some((cmd.path, profile, cmd.limits));
-        self.len += 1;
-        self.tail = cmd.path.end();
         Ok(())
+    }
+
+    fn enqueue(&mut self, m: Motion) {
+        self.tail = m.end();
+        self.queue[(self.head + self.len) % QUEUE_CAPACITY] = Some(m);
+        self.len += 1;
     }
 
     /// Number of queued motions (not counting the active one).
@@ -163,7 +263,7 @@ impl Interpolator {
         self.active.is_none() && self.stop.is_none() && self.len == 0
     }
 
-    fn pop(&mut self) -> Option<(Path, SpeedProfile, SpeedLimits)> {
+    fn pop(&mut self) -> Option<Motion> {
         if self.len == 0 {
             return None;
         }
@@ -181,32 +281,34 @@ impl Interpolator {
     pub fn request_stop(&mut self) {
         self.len = 0;
         self.head = 0;
-        self.queue = [None; QUEUE_CAPACITY];
+        for q in &mut self.queue {
+            *q = None;
+        }
         if self.stop.is_some() {
             return;
         }
-        if let Some(act) = self.active {
-            let st = act.profile.at(act.t);
-            let profile = match act.profile {
-                SpeedProfile::Trapezoidal { a, .. } => {
+        if let Some(act) = self.active.take() {
+            let (p, v, a) = act.motion.state(act.t);
+            let profile = match act.motion.trapezoidal_deceleration() {
+                Some(a) => {
                     // Same (infinite-jerk) model as the motion: decelerate at once.
                     let dec = self.stop_limits.amax.max(a);
-                    let mut p = Profile::new(State::new(0.0, st.v, -dec));
-                    p.push(st.v / dec, 0.0);
-                    p
+                    let mut pr = Profile::new(State::new(0.0, v, -dec));
+                    pr.push(v / dec, 0.0);
+                    pr
                 }
-                SpeedProfile::JerkLimited(_) => {
+                None => {
                     let mut lim = self.stop_limits;
                     // Brake at least as hard as the motion itself may, and keep the current
                     // acceleration admissible.
-                    if let SpeedLimits::JerkLimited { jmax, .. } = act.limits {
+                    if let Some(jmax) = act.motion.jerk() {
                         lim.jmax = lim.jmax.max(jmax);
                     }
-                    lim.amax = lim.amax.max(st.a.abs());
+                    lim.amax = lim.amax.max(a.abs());
                     lim.amin = -lim.amax;
                     Step1::solve(
                         ControlInterface::Velocity,
-                        &State::new(0.0, st.v, st.a),
+                        &State::new(0.0, v, a),
                         &State::new(0.0, 0.0, 0.0),
                         &lim,
                     )
@@ -223,13 +325,14 @@ impl Interpolator {
                 vmin = vmin.min(profile.at(t).0.v);
             }
             let reverses =
-                vmin < -1e-9 * st.v.abs().max(1e-9) || profile.position_extrema().min < -1e-12;
-            let overruns = st.p + profile.end().p > act.path.length();
-            if !(reverses || overruns) {
-                self.active = None;
+                vmin < -1e-9 * v.abs().max(1e-9) || profile.position_extrema().min < -1e-12;
+            let overruns = p + profile.end().p > act.motion.length();
+            if reverses || overruns {
+                self.active = Some(act);
+            } else {
                 self.stop = Some(Stop {
-                    path: act.path,
-                    s0: st.p,
+                    motion: act.motion,
+                    s0: p,
                     profile,
                     t: 0.0,
                 });
@@ -238,27 +341,26 @@ impl Interpolator {
         self.tail = if self.stop.is_some() {
             self.hold
         } else {
-            self.active.map_or(self.hold, |a| a.path.end())
+            self.active.as_ref().map_or(self.hold, |a| a.motion.end())
         };
     }
 
     /// Advances one cycle ([`CYCLE_S`]) and returns the setpoint for its end.
     pub fn step(&mut self) -> Setpoint {
         self.t += CYCLE_S;
-        if let Some(mut stop) = self.stop {
+        if let Some(mut stop) = self.stop.take() {
             stop.t += CYCLE_S;
             let (st, _) = stop.profile.at(stop.t);
-            let s = (stop.s0 + st.p).min(stop.path.length());
+            let len = stop.motion.length();
+            let s = (stop.s0 + st.p).min(len);
             let done = stop.t >= stop.profile.duration();
-            let v = if done || s >= stop.path.length() {
-                0.0
-            } else {
-                st.v
-            };
-            let (pose, d) = stop.path.sample(s);
+            let v = if done || s >= len { 0.0 } else { st.v };
+            let (pose, d) = stop.motion.at_length(s);
             self.hold = pose;
             self.tail = pose;
-            self.stop = if done { None } else { Some(stop) };
+            if !done {
+                self.stop = Some(stop);
+            }
             return self.setpoint(
                 pose,
                 d,
@@ -270,34 +372,28 @@ impl Interpolator {
         // Carry the time left over from a finished motion into the next one.
         let mut carry = CYCLE_S;
         loop {
-            let mut act = match self.active {
+            let mut act = match self.active.take() {
                 Some(a) => a,
                 None => match self.pop() {
-                    Some((path, profile, limits)) => Active {
-                        path,
-                        profile,
-                        limits,
-                        t: 0.0,
-                    },
+                    Some(motion) => Active { motion, t: 0.0 },
                     None => {
                         return self.setpoint(self.hold, Pose::default(), 0.0, 0.0, Phase::Idle);
                     }
                 },
             };
-            let dur = act.profile.duration();
+            let dur = act.motion.duration();
             if act.t + carry < dur {
                 act.t += carry;
-                let st = act.profile.at(act.t);
-                let (pose, d) = act.path.sample(st.p);
+                let (p, v, _) = act.motion.state(act.t);
+                let (pose, d) = act.motion.at_length(p);
                 self.hold = pose;
                 self.active = Some(act);
-                return self.setpoint(pose, d, st.p, st.v, Phase::Moving);
+                return self.setpoint(pose, d, p, v, Phase::Moving);
             }
             carry -= dur - act.t;
-            self.hold = act.path.end();
-            self.active = None;
+            self.hold = act.motion.end();
             if self.len == 0 {
-                let len = act.path.length();
+                let len = act.motion.length();
                 return self.setpoint(self.hold, Pose::default(), len, 0.0, Phase::Idle);
             }
         }

@@ -4,6 +4,7 @@
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
+use pcr_planner::composite::{CompositeLimits, CompositeMotion, CompositePath};
 use pcr_planner::interpolator::{Interpolator, MotionCommand, Phase};
 use pcr_planner::path::{Path, Pose};
 use pcr_planner::speed::SpeedLimits;
@@ -46,19 +47,42 @@ fn step_and_stop_do_not_allocate() {
         limits: lim,
     })
     .unwrap();
+    // a composite (boxed when pushed, before the counting starts): line, arc, line
+    let mut c = CompositePath::new(circle.end()).unwrap();
+    c.line_to(Pose::new(10.0, 0.0, 0.0), None).unwrap();
+    c.arc_around(10.0, 5.0, std::f64::consts::PI, 0.0, None)
+        .unwrap();
+    c.line_to(Pose::new(0.0, 10.0, 0.0), None).unwrap();
+    let m = CompositeMotion::plan(
+        &c,
+        &CompositeLimits {
+            vmax: 20.0,
+            amax: 50.0,
+            jmax: 500.0,
+        },
+    )
+    .unwrap();
+    ip.push_composite(m).unwrap();
     let before = ALLOCS.load(Ordering::SeqCst);
     let mut steps = 0;
+    let mut on_composite = None;
+    let mut stopped = false;
     for k in 0..10_000 {
-        if k == 200 {
+        if ip.queued() == 0 && on_composite.is_none() {
+            on_composite = Some(k);
+        }
+        if on_composite.is_some_and(|k0| k == k0 + 50) {
+            // 1 s into the composite
             ip.request_stop();
+            stopped = true;
         }
         let sp = ip.step();
         steps += 1;
-        if k > 200 && sp.phase == Phase::Idle {
+        if sp.phase == Phase::Idle {
             break;
         }
     }
     let after = ALLOCS.load(Ordering::SeqCst);
-    assert!(steps > 200);
+    assert!(steps > 200 && stopped);
     assert_eq!(after, before, "step() allocated");
 }
