@@ -78,7 +78,9 @@ pub struct Setpoint {
     pub phase: Phase,
 }
 
-/// A queued or active motion: one path with its speed profile, or a composite.
+/// A queued or active motion: one path with its speed profile (inline, so that queueing it
+/// never allocates), or a composite (boxed: it is far larger).
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Debug)]
 enum Motion {
     Single {
