@@ -7,6 +7,7 @@ use pcr_messages::{
     command_kind, move_kind, planner_state, program_id, task_flags, Command, Correction, MoveMsg,
     PlannerStatus, TaskSetpoint, MAX_MOVES, PROTOCOL_VERSION,
 };
+use pcr_planner::profiler::{calculate, ControlInterface, Input, Limits, State, Trajectory};
 
 /// Why a command was refused.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -188,6 +189,20 @@ pub struct InterpolatorStep<S> {
     done_sent: bool,
     /// (seq, program time) of the last [`HISTORY`] setpoints, for [`Self::rewind_to_seq`].
     history: [(u64, f64); HISTORY],
+    /// Program-time rate: 1 while running, 0 while paused or stopped.
+    rate: f64,
+    /// A jerk-limited change of the rate in progress (pause/stop brake, resume ramp).
+    ramp: Option<Ramp>,
+}
+
+/// A change of the program-time rate: program time follows the 1-DoF profile's position.
+#[derive(Debug, Clone, Copy)]
+struct Ramp {
+    traj: Trajectory,
+    /// Time since the ramp began, s.
+    t: f64,
+    /// Program time when it began, s.
+    tau0: f64,
 }
 
 /// Setpoints remembered for rewinding (64 cycles = 1.28 s at 20 ms).
@@ -208,6 +223,66 @@ impl<S: SetpointSource> InterpolatorStep<S> {
             seq: 0,
             done_sent: false,
             history: [(0, 0.0); HISTORY],
+            rate: 0.0,
+            ramp: None,
+        }
+    }
+
+    /// The program-time rate and its derivative now.
+    fn rate_state(&self) -> (f64, f64) {
+        match &self.ramp {
+            Some(r) => {
+                let (st, _) = r.traj.at_dof(0, r.t);
+                (st.v, st.a)
+            }
+            None => (self.rate, 0.0),
+        }
+    }
+
+    /// Starts a jerk-limited change of the program-time rate to `target` (0 or 1): pauses and
+    /// stops brake along the path, resumes accelerate along it, within the source's
+    /// [`SetpointSource::braking`] limits (scaled by the program's peak speed).
+    fn ramp_rate_to(&mut self, target: f64) {
+        let (r, dr) = self.rate_state();
+        let b = self.source.braking();
+        let v = b.peak_speed.max(1e-3);
+        let mut input = Input::new(1);
+        input.control_interface = ControlInterface::Velocity;
+        input.current[0] = State::new(0.0, r, dr);
+        input.target[0] = State::new(0.0, target, 0.0);
+        input.limits[0] = Limits::symmetric(1.0, b.amax / v, b.jmax / v);
+        match calculate(&input) {
+            Ok(traj) => {
+                self.ramp = Some(Ramp {
+                    traj,
+                    t: 0.0,
+                    tau0: self.tau_s,
+                })
+            }
+            Err(_) => {
+                // (cannot happen for finite positive limits) change at once
+                self.ramp = None;
+                self.rate = target;
+            }
+        }
+    }
+
+    /// Advances program time by `dt` at the current rate (following a ramp if one runs).
+    fn advance(&mut self, dt: f64) {
+        match &mut self.ramp {
+            Some(r) => {
+                r.t += dt;
+                let d = r.traj.duration();
+                let (st, _) = r.traj.at_dof(0, r.t.min(d));
+                let target = r.traj.profile(0).end().v;
+                let over = (r.t - d).max(0.0);
+                self.tau_s = r.tau0 + st.p + target * over;
+                if r.t >= d {
+                    self.rate = target;
+                    self.ramp = None;
+                }
+            }
+            None => self.tau_s += self.rate * dt,
         }
     }
 
@@ -225,6 +300,9 @@ impl<S: SetpointSource> InterpolatorStep<S> {
         }
         self.tau_s = tau;
         self.hold = self.source.sample(tau);
+        // The drive stopped there already: no brake, rate 0 (a resume ramps up again).
+        self.ramp = None;
+        self.rate = 0.0;
         true
     }
 
@@ -256,18 +334,23 @@ impl<S: SetpointSource> InterpolatorStep<S> {
             command_kind::PAUSE => {
                 if self.state == planner_state::RUNNING {
                     self.state = planner_state::PAUSED;
+                    self.ramp_rate_to(0.0);
                 }
                 Ok(())
             }
             command_kind::RESUME => {
                 if self.state == planner_state::PAUSED {
                     self.state = planner_state::RUNNING;
+                    self.ramp_rate_to(1.0);
                 }
                 Ok(())
             }
             command_kind::STOP => {
                 if matches!(self.state, planner_state::RUNNING | planner_state::PAUSED) {
                     self.state = planner_state::STOPPED;
+                    if self.rate_state().0 > 0.0 {
+                        self.ramp_rate_to(0.0);
+                    }
                 }
                 Ok(())
             }
@@ -278,6 +361,8 @@ impl<S: SetpointSource> InterpolatorStep<S> {
     fn start_program(&mut self, duration_s: f64, run_id: u32) {
         self.duration_s = duration_s;
         self.tau_s = 0.0;
+        self.rate = 1.0;
+        self.ramp = None;
         self.run_id = run_id;
         self.state = planner_state::RUNNING;
         self.done_sent = false;
@@ -285,7 +370,10 @@ impl<S: SetpointSource> InterpolatorStep<S> {
 
     /// Whether a new program may start now: not while one runs or is paused (stop it first).
     pub fn can_start(&self) -> Result<(), CommandError> {
-        if matches!(self.state, planner_state::RUNNING | planner_state::PAUSED) {
+        // (a stopped program may still be braking)
+        if matches!(self.state, planner_state::RUNNING | planner_state::PAUSED)
+            || self.ramp.is_some()
+        {
             return Err(CommandError::Busy(self.run_id));
         }
         Ok(())
@@ -359,7 +447,7 @@ impl<S: SetpointSource> InterpolatorStep<S> {
         let mut flags = 0;
         match self.state {
             planner_state::RUNNING => {
-                self.tau_s += dt;
+                self.advance(dt);
                 self.hold = self.source.sample(self.tau_s);
                 flags |= task_flags::ACTIVE;
                 if self.tau_s >= self.duration_s {
@@ -368,7 +456,17 @@ impl<S: SetpointSource> InterpolatorStep<S> {
                     self.done_sent = true;
                 }
             }
-            planner_state::PAUSED => flags |= task_flags::ACTIVE | task_flags::PAUSED,
+            planner_state::PAUSED | planner_state::STOPPED => {
+                // Braking along the path until the program-time rate is 0.
+                if self.ramp.is_some() {
+                    self.advance(dt);
+                    self.tau_s = self.tau_s.min(self.duration_s);
+                    self.hold = self.source.sample(self.tau_s);
+                }
+                if self.state == planner_state::PAUSED {
+                    flags |= task_flags::ACTIVE | task_flags::PAUSED;
+                }
+            }
             _ => {}
         }
         self.seq += 1;
@@ -396,25 +494,95 @@ mod tests {
     use crate::setpoint::InterimPathSource;
 
     #[test]
-    fn pause_freezes_and_resume_continues() {
+    fn pause_brakes_along_the_path_and_resume_accelerates_again() {
         let mut s = InterpolatorStep::new(InterimPathSource::new(), Pose::default());
         s.command(&simple_command(command_kind::RUN, program_id::CIRCLE, 7))
             .unwrap();
         let mut t = 0.0;
-        for _ in 0..100 {
+        let mut last = s.step(t);
+        let mut v_last = 0.0;
+        for _ in 0..300 {
+            t += 0.02;
+            let sp = s.step(t);
+            v_last = (sp.x_mm - last.x_mm).hypot(sp.y_mm - last.y_mm) / 0.02;
+            last = sp;
+        }
+        assert!(v_last > 10.0, "moving at {v_last} mm/s");
+        s.command(&simple_command(command_kind::PAUSE, 0, 7))
+            .unwrap();
+        // braking: the speed falls smoothly (at most the braking acceleration per cycle),
+        // staying on the program's path, until it stops
+        let b = s.source().braking();
+        let mut v_prev = v_last;
+        let mut stopped_at = None;
+        for k in 0..200 {
+            t += 0.02;
+            let sp = s.step(t);
+            assert!(sp.flags & task_flags::PAUSED != 0);
+            let v = (sp.x_mm - last.x_mm).hypot(sp.y_mm - last.y_mm) / 0.02;
+            assert!(
+                v <= v_prev + 1e-6,
+                "speeds up while braking: {v_prev} -> {v}"
+            );
+            assert!(
+                v_prev - v <= (b.amax * 2.0) * 0.02 + 1e-6,
+                "{v_prev} -> {v}"
+            );
+            let on_path = s.source().sample(s.status(t).progress_s);
+            assert!((on_path.x - sp.x_mm).abs() < 1e-12);
+            if v == 0.0 && stopped_at.is_none() {
+                stopped_at = Some(k);
+            }
+            v_prev = v;
+            last = sp;
+        }
+        let k = stopped_at.expect("stops");
+        assert!(k > 3, "stopped at once (k = {k}), not braked");
+        // a paused program holds
+        let a = s.step(t + 1.0);
+        assert_eq!((a.x_mm, a.y_mm), (last.x_mm, last.y_mm));
+        // resume: the speed rises gradually, then the program continues
+        s.command(&simple_command(command_kind::RESUME, 0, 7))
+            .unwrap();
+        t += 1.0;
+        let mut prev = a;
+        let first = s.step(t + 0.02);
+        let v1 = (first.x_mm - prev.x_mm).hypot(first.y_mm - prev.y_mm) / 0.02;
+        assert!(v1 < 2.0, "jumped to {v1} mm/s");
+        prev = first;
+        let mut v = v1;
+        for k in 2..100 {
+            let sp = s.step(t + 0.02 * k as f64);
+            v = (sp.x_mm - prev.x_mm).hypot(sp.y_mm - prev.y_mm) / 0.02;
+            prev = sp;
+        }
+        assert!((v - v_last).abs() < 1.0, "back to speed: {v} vs {v_last}");
+    }
+
+    #[test]
+    fn a_stop_brakes_and_a_new_program_waits_for_it() {
+        let mut s = InterpolatorStep::new(InterimPathSource::new(), Pose::default());
+        let run = simple_command(command_kind::RUN, program_id::CIRCLE, 1);
+        s.command(&run).unwrap();
+        let mut t = 0.0;
+        for _ in 0..300 {
             s.step(t);
             t += 0.02;
         }
-        s.command(&simple_command(command_kind::PAUSE, 0, 7))
+        s.command(&simple_command(command_kind::STOP, 0, 1))
             .unwrap();
+        assert_eq!(s.status(t).state, planner_state::STOPPED);
         let a = s.step(t);
-        let b = s.step(t + 1.0);
-        assert_eq!((a.x_mm, a.y_mm), (b.x_mm, b.y_mm));
-        assert!(b.flags & task_flags::PAUSED != 0);
-        s.command(&simple_command(command_kind::RESUME, 0, 7))
-            .unwrap();
-        let c = s.step(t + 1.02);
-        assert!(c.x_mm != b.x_mm || c.y_mm != b.y_mm);
+        assert!(matches!(s.command(&run), Err(CommandError::Busy(_))));
+        let b = s.step(t + 0.02);
+        assert!(a.x_mm != b.x_mm || a.y_mm != b.y_mm, "still braking");
+        for k in 2..200 {
+            s.step(t + 0.02 * k as f64);
+        }
+        let c = s.step(t + 4.0);
+        let d = s.step(t + 4.02);
+        assert_eq!((c.x_mm, c.y_mm), (d.x_mm, d.y_mm));
+        s.command(&run).unwrap();
     }
 
     #[test]

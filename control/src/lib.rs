@@ -41,5 +41,6 @@ pub use plant_drive::{plant_backend, PlantDrive, PlantSensor};
 pub use recorder::Recorder;
 pub use runtime::{CycleOutput, InProcessChain, InterimChain, RunError, SimChain, SimChainError};
 pub use setpoint::{
-    paper_circle, paper_program, paper_square, InterimPathSource, Move, PlanError, SetpointSource,
+    paper_circle, paper_program, paper_square, Braking, InterimPathSource, Move, PlanError,
+    SetpointSource,
 };

@@ -6,7 +6,7 @@
 //! distance from singularity, drive step rates) sampled every 2 ms, and refuses a program the
 //! robot cannot follow. `sample` evaluates the planned profile: no allocation.
 
-use crate::setpoint::{active_piece, Move, PlanError, SetpointSource};
+use crate::setpoint::{active_piece, Braking, Move, PlanError, SetpointSource};
 use pcr_kinematics::{CheckOptions, Pose, Robot};
 use pcr_planner::path::{Path, Pose as PPose};
 use pcr_planner::speed::{SpeedLimits, SpeedProfile};
@@ -45,6 +45,8 @@ pub struct PlannerSource {
     /// (start time s, duration s, piece)
     pieces: Vec<(f64, f64, Piece)>,
     start: Pose,
+    /// Peak path speed of the loaded program, mm/s.
+    peak_speed: f64,
 }
 
 fn pp(p: &Pose) -> PPose {
@@ -63,6 +65,7 @@ impl PlannerSource {
             limits,
             pieces: Vec::new(),
             start: Pose::default(),
+            peak_speed: 0.0,
         }
     }
 
@@ -166,9 +169,25 @@ impl SetpointSource for PlannerSource {
                     why: e.to_string(),
                 })?;
         }
+        self.peak_speed = moves
+            .iter()
+            .map(|m| match *m {
+                Move::Line { speed_mm_s, .. } | Move::Circle { speed_mm_s, .. } => speed_mm_s,
+                Move::Dwell { .. } => 0.0,
+            })
+            .fold(0.0, f64::max);
         self.pieces = pieces.into_iter().map(|(a, b, c, _)| (a, b, c)).collect();
         self.start = start;
         Ok(t)
+    }
+
+    fn braking(&self) -> Braking {
+        // Half the path limits: the program's own acceleration adds to the braking.
+        Braking {
+            peak_speed: self.peak_speed.max(1.0),
+            amax: 0.5 * self.limits.amax,
+            jmax: 0.5 * self.limits.jmax,
+        }
     }
 
     fn sample(&self, tau_s: f64) -> Pose {

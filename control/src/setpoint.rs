@@ -89,6 +89,34 @@ pub trait SetpointSource {
     /// The setpoint at program time `tau_s` (0 = start of the program); before 0 the start pose,
     /// after the end the final pose. Must not allocate.
     fn sample(&self, tau_s: f64) -> Pose;
+
+    /// Peak path speed of the loaded program, mm/s, and the path acceleration (mm/s^2) and
+    /// jerk (mm/s^3) a pause or stop may add when it slows the program down. The interpolator
+    /// brakes by scaling program time, so the path is kept exactly.
+    fn braking(&self) -> Braking {
+        Braking::default()
+    }
+}
+
+/// How hard a pause or stop may slow a program down (see [`SetpointSource::braking`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Braking {
+    /// Peak path speed of the program, mm/s.
+    pub peak_speed: f64,
+    /// Added path acceleration, mm/s^2.
+    pub amax: f64,
+    /// Added path jerk, mm/s^3.
+    pub jmax: f64,
+}
+
+impl Default for Braking {
+    fn default() -> Self {
+        Braking {
+            peak_speed: 100.0,
+            amax: 100.0,
+            jmax: 1000.0,
+        }
+    }
 }
 
 #[derive(Debug, Clone, Copy)]
