@@ -6,10 +6,15 @@
 use super::limits::{Limits, State};
 
 /// Maximal number of constant-jerk segments of a [`Profile`] (brake 2 + blend of two 7-phase
-/// profiles 14, with margin).
-pub const MAX_SEGMENTS: usize = 24;
+/// profiles: at most 13 segments, 14 if their durations differ by rounding; with margin).
+pub const MAX_SEGMENTS: usize = 18;
 
 /// Piecewise-constant-jerk trajectory of one degree of freedom.
+///
+/// Compact (about 330 bytes): the segments, the start and final states and the duration. The
+/// state inside the profile is integrated from the start on demand, with the same operations in
+/// the same order as when the profile was built, so the results are identical to caching the
+/// state at every segment start.
 #[derive(Clone, Copy, Debug)]
 pub struct Profile {
     n: usize,
@@ -17,10 +22,12 @@ pub struct Profile {
     t: [f64; MAX_SEGMENTS],
     /// Segment jerks in u/s^3.
     j: [f64; MAX_SEGMENTS],
-    /// State at the start of each segment; `s[n]` is the final state.
-    s: [State; MAX_SEGMENTS + 1],
-    /// Start time of each segment in s; `t0[n]` is the duration.
-    t0: [f64; MAX_SEGMENTS + 1],
+    /// Start state.
+    start: State,
+    /// Final state (after the last segment).
+    end: State,
+    /// Duration in s (sum of the segment durations, accumulated in order).
+    dur: f64,
 }
 
 /// Position extrema of one DoF over a time interval.
@@ -43,13 +50,15 @@ impl Profile {
             n: 0,
             t: [0.0; MAX_SEGMENTS],
             j: [0.0; MAX_SEGMENTS],
-            s: [start; MAX_SEGMENTS + 1],
-            t0: [0.0; MAX_SEGMENTS + 1],
+            start,
+            end: start,
+            dur: 0.0,
         }
     }
 
     /// Appends a segment of `dur` seconds at jerk `jerk`. Non-positive durations are skipped.
     /// Returns false if the capacity is exhausted.
+    #[inline]
     pub fn push(&mut self, dur: f64, jerk: f64) -> bool {
         if dur <= 0.0 {
             return true;
@@ -60,21 +69,32 @@ impl Profile {
         let i = self.n;
         self.t[i] = dur;
         self.j[i] = jerk;
-        self.s[i + 1] = self.s[i].integrate(dur, jerk);
-        self.t0[i + 1] = self.t0[i] + dur;
+        self.end = self.end.integrate(dur, jerk);
+        self.dur += dur;
         self.n += 1;
         true
     }
 
     /// Makes this profile a copy of `other`, copying only the used entries (cheaper than an
     /// assignment of the whole fixed-capacity arrays; entries past the length are never read).
+    #[inline]
     pub fn copy_from(&mut self, other: &Profile) {
         let n = other.n;
         self.n = n;
         self.t[..n].copy_from_slice(&other.t[..n]);
         self.j[..n].copy_from_slice(&other.j[..n]);
-        self.s[..=n].copy_from_slice(&other.s[..=n]);
-        self.t0[..=n].copy_from_slice(&other.t0[..=n]);
+        self.start = other.start;
+        self.end = other.end;
+        self.dur = other.dur;
+    }
+
+    /// Resets this profile to an empty one starting at `start` (no copy of the arrays).
+    #[inline]
+    pub fn reset(&mut self, start: State) {
+        self.n = 0;
+        self.start = start;
+        self.end = start;
+        self.dur = 0.0;
     }
 
     /// Appends all segments of `other` (whose start state is assumed to equal this end state).
@@ -99,42 +119,39 @@ impl Profile {
 
     /// Duration in s.
     pub fn duration(&self) -> f64 {
-        self.t0[self.n]
+        self.dur
     }
 
     /// Start state.
     pub fn start(&self) -> State {
-        self.s[0]
+        self.start
     }
 
     /// Final state (at [`Profile::duration`]).
     pub fn end(&self) -> State {
-        self.s[self.n]
+        self.end
     }
 
     /// State and jerk at time `t` (s). Before 0 the start state is returned; after the
     /// duration the profile continues with zero jerk.
     pub fn at(&self, t: f64) -> (State, f64) {
         if t <= 0.0 {
-            return (self.s[0], if self.n > 0 { self.j[0] } else { 0.0 });
+            return (self.start, if self.n > 0 { self.j[0] } else { 0.0 });
         }
-        if t >= self.t0[self.n] {
-            return (self.s[self.n].integrate(t - self.t0[self.n], 0.0), 0.0);
+        if t >= self.dur {
+            return (self.end.integrate(t - self.dur, 0.0), 0.0);
         }
-        // Binary search of the segment containing t.
-        let (mut lo, mut hi) = (0, self.n);
-        while hi - lo > 1 {
-            let mid = (lo + hi) / 2;
-            if self.t0[mid] <= t {
-                lo = mid;
-            } else {
-                hi = mid;
+        // Walk the segments, integrating as `push` did (identical segment start states).
+        let (mut s, mut t0) = (self.start, 0.0);
+        for i in 0..self.n {
+            let t1 = t0 + self.t[i];
+            if t1 > t || i + 1 == self.n {
+                return (s.integrate(t - t0, self.j[i]), self.j[i]);
             }
+            s = s.integrate(self.t[i], self.j[i]);
+            t0 = t1;
         }
-        (
-            self.s[lo].integrate(t - self.t0[lo], self.j[lo]),
-            self.j[lo],
-        )
+        (s, 0.0)
     }
 
     /// True if velocity and acceleration stay within `lim` (widened by `rel` times the limit
@@ -155,8 +172,12 @@ impl Profile {
         if first >= self.n {
             return true;
         }
+        let mut s0 = self.start;
+        for i in 0..first {
+            s0 = s0.integrate(self.t[i], self.j[i]);
+        }
         integrate_checked(
-            self.s[first],
+            s0,
             &self.t[first..self.n],
             &self.j[first..self.n],
             lim,
@@ -168,7 +189,7 @@ impl Profile {
 
     /// Position extrema over `[0, duration]`.
     pub fn position_extrema(&self) -> PositionExtrema {
-        let s0 = self.s[0];
+        let s0 = self.start;
         let mut ex = PositionExtrema {
             min: s0.p,
             t_min: 0.0,
@@ -185,8 +206,9 @@ impl Profile {
                 ex.t_max = t;
             }
         };
+        let (mut s, mut t0) = (self.start, 0.0);
         for i in 0..self.n {
-            let (s, j, d) = (self.s[i], self.j[i], self.t[i]);
+            let (j, d) = (self.j[i], self.t[i]);
             // v(t) = s.v + s.a t + j t^2 / 2 = 0
             let mut roots = [f64::NAN; 2];
             if j.abs() > 0.0 {
@@ -200,10 +222,12 @@ impl Profile {
             }
             for r in roots {
                 if r > 0.0 && r < d {
-                    see(s.integrate(r, j).p, self.t0[i] + r);
+                    see(s.integrate(r, j).p, t0 + r);
                 }
             }
-            see(self.s[i + 1].p, self.t0[i + 1]);
+            s = s.integrate(d, j);
+            t0 += d;
+            see(s.p, t0);
         }
         ex
     }
@@ -263,7 +287,7 @@ impl Profile {
 
     /// The profile with every state and jerk multiplied by `k` (start state included).
     pub fn scaled(&self, k: f64) -> Profile {
-        let s = self.s[0];
+        let s = self.start;
         let mut r = Profile::new(State::new(s.p * k, s.v * k, s.a * k));
         for i in 0..self.n {
             r.push(self.t[i], self.j[i] * k);
@@ -273,7 +297,7 @@ impl Profile {
 
     /// Same profile with the start position replaced by `p0` (positions shifted).
     pub fn with_start_position(&self, p0: f64) -> Profile {
-        let s = self.s[0];
+        let s = self.start;
         let mut r = Profile::new(State::new(p0, s.v, s.a));
         for i in 0..self.n {
             r.push(self.t[i], self.j[i]);
