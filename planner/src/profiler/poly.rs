@@ -161,15 +161,6 @@ impl Poly {
         r
     }
 
-    /// Degree after dropping leading coefficients that are exactly zero.
-    fn trimmed(&self) -> Poly {
-        let mut r = *self;
-        while r.deg > 0 && r.c[r.deg] == 0.0 {
-            r.deg -= 1;
-        }
-        r
-    }
-
     /// True if `|p|` is provably bounded away from zero on `[lo, hi]` (so there is no root and
     /// no negligible value anywhere there): with the Taylor coefficients `b_k` at the midpoint
     /// `m` and the half-width `r`, `|p(x) - b_0| <= sum_{k>=1} |b_k| r^k`. The margin covers the
@@ -207,14 +198,30 @@ impl Poly {
     /// as a root as well, so that tangential solutions are not lost; callers validate every
     /// root anyway.
     pub fn roots_in(&self, lo: f64, hi: f64, out: &mut [f64; ROOTS_CAP]) -> usize {
-        let p = self.trimmed();
         if lo > hi || !lo.is_finite() || !hi.is_finite() {
             return 0;
         }
+        // Read in place (a copy of a just-built polynomial stalls on store forwarding); copy
+        // only to drop zero leading coefficients.
+        let mut deg = self.deg;
+        while deg > 0 && self.c[deg] == 0.0 {
+            deg -= 1;
+        }
+        if deg != self.deg {
+            let mut p = *self;
+            p.deg = deg;
+            return p.roots_in_exact(lo, hi, out);
+        }
+        self.roots_in_exact(lo, hi, out)
+    }
+
+    /// [`Poly::roots_in`] for a polynomial whose leading coefficient is not zero.
+    fn roots_in_exact(&self, lo: f64, hi: f64, out: &mut [f64; ROOTS_CAP]) -> usize {
+        let p = self;
         match p.deg {
             0 => 0,
-            2 => quadratic_roots_in(&p, lo, hi, out),
-            3 => cubic_roots_in(&p, lo, hi, out),
+            2 => quadratic_roots_in(p, lo, hi, out),
+            3 => cubic_roots_in(p, lo, hi, out),
             1 => {
                 let r = -p.c[0] / p.c[1];
                 if r >= lo && r <= hi {
@@ -224,13 +231,38 @@ impl Poly {
                     0
                 }
             }
+            4 => {
+                if p.excludes_roots4(lo, hi) {
+                    return 0;
+                }
+                match quartic_roots_in(p, lo, hi, out) {
+                    Some(n) => n,
+                    None => p.isolate_roots(lo, hi, out),
+                }
+            }
             _ if p.excludes_roots(lo, hi) => 0,
-            4 => match quartic_roots_in(&p, lo, hi, out) {
-                Some(n) => n,
-                None => p.isolate_roots(lo, hi, out),
-            },
             _ => p.isolate_roots(lo, hi, out),
         }
+    }
+
+    /// [`Poly::excludes_roots`] for a quartic, with the Taylor coefficients at the midpoint
+    /// written out (independent products instead of a chain of synthetic divisions).
+    fn excludes_roots4(&self, lo: f64, hi: f64) -> bool {
+        let [c0, c1, c2, c3, c4, ..] = self.c;
+        let m = 0.5 * (lo + hi);
+        let r = 0.5 * (hi - lo);
+        let m2 = m * m;
+        let b3 = c3 + 4.0 * c4 * m;
+        let b2 = c2 + 3.0 * c3 * m + 6.0 * c4 * m2;
+        let b1 = c1 + 2.0 * c2 * m + (3.0 * c3 + 4.0 * c4 * m) * m2;
+        let b0 = c0 + m * (c1 + m * (c2 + m * (c3 + m * c4)));
+        let r2 = r * r;
+        let bound = (b1.abs() + b2.abs() * r) * r + (b3.abs() + c4.abs() * r) * r * r2;
+        let xm = m.abs() + r;
+        let xm2 = xm * xm;
+        let mag =
+            c0.abs() + c1.abs() * xm + (c2.abs() + c3.abs() * xm) * xm2 + c4.abs() * xm2 * xm2;
+        b0.abs() > bound + 1e-10 * mag
     }
 
     /// The general root isolation of [`Poly::roots_in`] (degree >= 4): split at the roots of
@@ -318,13 +350,23 @@ fn quadratic_roots_in(p: &Poly, lo: f64, hi: f64, out: &mut [f64; ROOTS_CAP]) ->
 /// Writes the finite candidates of `cand` within `[lo, hi]` into `out`, ascending, dropping
 /// near-duplicates (as the general routine); returns their count.
 fn collect_roots(cand: &mut [f64], lo: f64, hi: f64, out: &mut [f64; ROOTS_CAP]) -> usize {
-    cand.sort_unstable_by(f64::total_cmp);
+    // Keep the candidates in range (NaN is not), then an insertion sort of the few left.
+    let mut m = 0;
+    for i in 0..cand.len() {
+        let r = cand[i];
+        if r >= lo && r <= hi {
+            let mut k = m;
+            while k > 0 && cand[k - 1] > r {
+                cand[k] = cand[k - 1];
+                k -= 1;
+            }
+            cand[k] = r;
+            m += 1;
+        }
+    }
     let xs = lo.abs().max(hi.abs()).max(1e-300);
     let mut n = 0;
-    for &r in cand.iter() {
-        if !(lo..=hi).contains(&r) {
-            continue;
-        }
+    for &r in cand[..m].iter() {
         if n > 0 && (r - out[n - 1]).abs() <= 1e-14 * xs {
             continue;
         }
@@ -526,10 +568,16 @@ fn quartic_roots_in(p: &Poly, lo: f64, hi: f64, out: &mut [f64; ROOTS_CAP]) -> O
     }
     let ddp = dp.deriv();
     let mut cand = [f64::NAN; 4];
+    // Candidates clearly outside the range are not polished (polishing moves a root by far
+    // less than this margin).
+    let margin = 1e-6 * lo.abs().max(hi.abs()).max(hi - lo);
     for i in 0..ny {
         let x = ys[i] - s4;
         if !x.is_finite() {
             return None;
+        }
+        if x < lo - margin || x > hi + margin {
+            continue;
         }
         cand[i] = if vertex[i] {
             // A complex pair near the axis is a (near) double root at a critical point:
@@ -699,6 +747,38 @@ mod tests {
                 assert!(p.eval(*y).abs() <= 1e3 * tiny_at(&p, *y), "case {k}: {y}");
             }
         }
+    }
+
+    #[test]
+    fn quartic_exclusion_agrees_with_general_test() {
+        let mut seed = 99u64;
+        let mut rnd = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((seed >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+        };
+        let mut iso = [0.0; ROOTS_CAP];
+        let mut excluded = 0;
+        for _ in 0..5000 {
+            let sc = 10f64.powf(2.0 * rnd());
+            let p = from_roots(&[rnd() * sc, rnd() * sc, rnd() * sc, rnd() * sc])
+                .add(&Poly::constant(rnd() * sc.powi(4)));
+            let (lo, hi) = (rnd() * sc, rnd() * sc);
+            let (lo, hi) = (lo.min(hi), lo.max(hi));
+            let e4 = p.excludes_roots4(lo, hi);
+            let e = p.excludes_roots(lo, hi);
+            if e4 {
+                excluded += 1;
+                assert_eq!(p.isolate_roots(lo, hi, &mut iso), 0);
+            }
+            // Same test up to rounding: they may only disagree when the margin is tight.
+            if e4 != e {
+                let m = 0.5 * (lo + hi);
+                assert!(p.eval(m).abs() < 1e-6 * tiny_at(&p, m) * 1e13);
+            }
+        }
+        assert!(excluded > 1000, "{excluded}");
     }
 
     #[test]

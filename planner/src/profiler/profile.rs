@@ -358,7 +358,8 @@ pub fn integrate_checked(
         if d <= 0.0 {
             continue;
         }
-        if j != 0.0 && check_velocity {
+        // Interior velocity extremum where the acceleration changes sign (at -a/j).
+        if j != 0.0 && check_velocity && s.a * (s.a + j * d) < 0.0 {
             let tc = -s.a / j;
             if tc > 0.0 && tc < d && !vok(s.integrate(tc, j).v) {
                 return None;
