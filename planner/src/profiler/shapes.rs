@@ -175,10 +175,15 @@ struct CaseParam {
     k: f64,
     lo: f64,
     hi: f64,
+    /// `1 / jmax`.
+    ij: f64,
+    /// `1 / amax` (`PlateauAmax`) or `1 / amin` (`PlateauAmin`, `PlateauBoth`).
+    ia: f64,
 }
 
 impl CaseParam {
     /// The case's parameter range and constant, or None if the case cannot exist for `pr`.
+    #[inline]
     fn new(case: Case, pr: &Problem) -> Option<CaseParam> {
         let Problem {
             v0,
@@ -214,6 +219,8 @@ impl CaseParam {
                     k,
                     lo: lo.max(0.0),
                     hi,
+                    ij: 1.0 / j,
+                    ia: 0.0,
                 })
             }
             Case::PlateauAmax | Case::PlateauBoth
@@ -240,6 +247,8 @@ impl CaseParam {
                     k,
                     lo: amin - w,
                     hi: af.min(amax) + w,
+                    ij: 1.0 / j,
+                    ia: 1.0 / amax,
                 })
             }
             Case::PlateauAmin => {
@@ -251,6 +260,8 @@ impl CaseParam {
                     k,
                     lo: a0.max(amin) - w,
                     hi: amax + w,
+                    ij: 1.0 / j,
+                    ia: 1.0 / amin,
                 })
             }
             Case::PlateauBoth => {
@@ -269,6 +280,8 @@ impl CaseParam {
                     k,
                     lo: zmin - w,
                     hi: zmax.max(zmin) + w,
+                    ij: 1.0 / j,
+                    ia: 1.0 / amin,
                 })
             }
             Case::PlateauVmax => None,
@@ -279,35 +292,34 @@ impl CaseParam {
     #[inline]
     fn durations(&self, pr: &Problem, x: f64) -> [f64; 7] {
         let lim = &pr.lim;
-        let j = lim.jmax;
         let (amax, amin) = (lim.amax, lim.amin);
-        let k = self.k;
+        let (k, ij, ia) = (self.k, self.ij, self.ia);
         let mut t = [0.0; 7];
         match self.case {
             Case::Ramps => {
-                let ju = j * x;
-                t[0] = (0.5 * (x * x + 0.5 * k) - pr.a0 * x) / ju;
-                t[2] = x / j;
-                t[6] = (pr.af * x - 0.5 * (0.5 * k - x * x)) / ju;
+                let iju = ij / x;
+                t[0] = (0.5 * (x * x + 0.5 * k) - pr.a0 * x) * iju;
+                t[2] = x * ij;
+                t[6] = (pr.af * x - 0.5 * (0.5 * k - x * x)) * iju;
             }
             Case::PlateauAmax => {
-                t[0] = (amax - pr.a0) / j;
-                t[1] = (x * x / j + k) / amax;
-                t[2] = (amax - x) / j;
-                t[6] = (pr.af - x) / j;
+                t[0] = (amax - pr.a0) * ij;
+                t[1] = (x * x * ij + k) * ia;
+                t[2] = (amax - x) * ij;
+                t[6] = (pr.af - x) * ij;
             }
             Case::PlateauAmin => {
-                t[0] = (x - pr.a0) / j;
-                t[2] = (x - amin) / j;
-                t[5] = (k - x * x / j) / amin;
-                t[6] = (pr.af - amin) / j;
+                t[0] = (x - pr.a0) * ij;
+                t[2] = (x - amin) * ij;
+                t[5] = (k - x * x * ij) * ia;
+                t[6] = (pr.af - amin) * ij;
             }
             Case::PlateauBoth => {
-                t[0] = (amax - pr.a0) / j;
+                t[0] = (amax - pr.a0) * ij;
                 t[1] = x;
-                t[2] = (amax - amin) / j;
-                t[5] = (k - amax * x) / amin;
-                t[6] = (pr.af - amin) / j;
+                t[2] = (amax - amin) * ij;
+                t[5] = (k - amax * x) * ia;
+                t[6] = (pr.af - amin) * ij;
             }
             Case::PlateauVmax => {}
         }
@@ -433,7 +445,10 @@ impl CaseParam {
         let t = self.durations(pr, x);
         let mut s = State::new(0.0, pr.v0, pr.a0);
         for (ti, jk) in t.iter().zip(pr.jerks()) {
-            s = s.integrate(*ti, jk);
+            // Phases a case never uses are skipped (the same branch every call).
+            if *ti != 0.0 {
+                s = s.integrate(*ti, jk);
+            }
         }
         s.p - pr.d
     }
@@ -648,11 +663,24 @@ pub fn solve_all(pr: &Problem, goal: Goal, out: &mut impl FnMut(Shape)) {
 /// The extremal shape of duration `td`: the one with the largest final position if `dir = 1`,
 /// the smallest if `dir = -1`; with that position. None if `td` is too short to reach the target
 /// velocity and acceleration.
+///
+/// The first valid shape found is returned: for a fixed duration, maximising the final position
+/// is a convex problem (linear objective, convex constraints), and every valid UDDU shape
+/// satisfies Pontryagin's conditions for it (the acceleration costate is an upward quadratic,
+/// jerk `+j, -j, +j` between its roots, plateaus where a limit is active), which are sufficient
+/// here; so all valid shapes of that duration reach the same, maximal, position. The cases are
+/// tried in the order of how often they are the extreme in random motions (cruise first).
 pub fn extreme_at(pr: &Problem, dir: f64, td: f64) -> Option<(f64, Shape)> {
     let frame = if dir > 0.0 { *pr } else { pr.mirrored() };
     let tol = tolerances(&frame);
     let mut best: Option<(f64, Shape)> = None;
-    for case in CASES {
+    for case in [
+        Case::PlateauVmax,
+        Case::PlateauBoth,
+        Case::Ramps,
+        Case::PlateauAmax,
+        Case::PlateauAmin,
+    ] {
         solve_case_with(
             &frame,
             case,
@@ -664,6 +692,9 @@ pub fn extreme_at(pr: &Problem, dir: f64, td: f64) -> Option<(f64, Shape)> {
                 }
             },
         );
+        if best.is_some() {
+            break;
+        }
     }
     best.map(|(p, s)| (dir * p, Shape { t: s.t, dir }))
 }
