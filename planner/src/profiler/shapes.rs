@@ -453,36 +453,41 @@ impl CaseParam {
         s.p - pr.d
     }
 
-    /// Secant refinement of a root of the polynomial on the directly integrated final
-    /// position; keeps the better of the two.
-    fn polish(&self, pr: &Problem, r0: f64) -> f64 {
-        let mut x0 = r0;
-        let mut f0 = self.position_error(pr, x0);
-        let best = (x0, f0.abs());
-        let h = 1e-7 * r0.abs().max(1e-3 * (self.hi - self.lo).abs()).max(1e-300);
-        let mut x1 = r0 + h;
-        let mut f1 = self.position_error(pr, x1);
-        let mut best = if f1.abs() < best.1 {
-            (x1, f1.abs())
-        } else {
-            best
-        };
-        for _ in 0..8 {
-            if f1 == f0 || best.1 == 0.0 {
+    /// Newton refinement of a root `r0` of the polynomial `eq` on the directly integrated final
+    /// position error `err`; the derivative comes from the polynomial
+    /// (`eq = factor * err`, with `factor` constant, or `4 j^2 u` for `Ramps`). Keeps the best
+    /// point seen.
+    fn polish(&self, pr: &Problem, eq: &Poly, r0: f64) -> f64 {
+        let deq = eq.deriv();
+        let j = pr.lim.jmax;
+        let (amax, amin) = (pr.lim.amax, pr.lim.amin);
+        let mut x = r0;
+        let mut f = self.position_error(pr, x);
+        let mut best = (x, f.abs());
+        for _ in 0..6 {
+            if f == 0.0 {
                 break;
             }
-            let x2 = x1 - f1 * (x1 - x0) / (f1 - f0);
-            if !x2.is_finite() {
+            // err' = (eq' - err * factor') / factor.
+            let d = match self.case {
+                Case::Ramps => (deq.eval(x) - f * 4.0 * j * j) / (4.0 * j * j * x),
+                Case::PlateauAmax => deq.eval(x) / (2.0 * j * j * amax),
+                Case::PlateauAmin => deq.eval(x) / (-2.0 * j * j * amin),
+                _ => deq.eval(x) / (-2.0 * j * amin / (amax - amin)),
+            };
+            if d == 0.0 || !d.is_finite() {
                 break;
             }
-            let f2 = self.position_error(pr, x2);
-            if f2.abs() < best.1 {
-                best = (x2, f2.abs());
-            }
-            (x0, f0, x1, f1) = (x1, f1, x2, f2);
-            if (x1 - x0).abs() <= 1e-15 * x1.abs() {
+            let xn = x - f / d;
+            if !xn.is_finite() || (xn - x).abs() <= 1e-16 * x.abs() {
                 break;
             }
+            let fnew = self.position_error(pr, xn);
+            if fnew.is_nan() || fnew.abs() >= best.1 {
+                break;
+            }
+            best = (xn, fnew.abs());
+            (x, f) = (xn, fnew);
         }
         best.0
     }
@@ -576,7 +581,16 @@ fn solve_case_with(
             continue;
         }
         let r = match goal {
-            Goal::Position => cp.polish(pr, r),
+            Goal::Position => {
+                // Roots with a clearly negative phase are not worth polishing (polishing moves
+                // the durations by far less than this margin).
+                let t = cp.durations(pr, r);
+                let scale = t.iter().fold(0.0f64, |m, x| m + x.abs());
+                if t.iter().any(|x| *x < -1e-6 * scale - tol.t) {
+                    continue;
+                }
+                cp.polish(pr, &eq, r)
+            }
             Goal::Duration(_) => r,
         };
         if let Some((s, e)) = validate(pr, cp.durations(pr, r), goal, tol) {
