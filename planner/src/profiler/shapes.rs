@@ -396,15 +396,45 @@ impl CaseParam {
     }
 
     /// Final position (relative to the start) of the shape at parameter 0 (plateau cases).
+    ///
+    /// The acceleration at every phase start is known from the case (e.g. `a0, amax, amax, 0`
+    /// for `PlateauAmax`), so each phase's velocity gain `t (a + j t / 2)` and own displacement
+    /// `t^2 (a / 2 + j t / 6)` are independent; the position is
+    /// `sum_k (v_k t_k + own_k)` with `v_k` the prefix sums of the gains: the same quantities as
+    /// integrating the state phase by phase, without its long chain of dependent operations.
     fn p0(&self, pr: &Problem) -> f64 {
         let t = self.durations(pr, 0.0);
-        let mut s = State::new(0.0, pr.v0, pr.a0);
-        for (ti, jk) in t.iter().zip(pr.jerks()) {
-            if *ti != 0.0 {
-                s = s.integrate(*ti, jk);
-            }
-        }
-        s.p
+        let lim = &pr.lim;
+        let (j, amax, amin) = (lim.jmax, lim.amax, lim.amin);
+        // (duration, jerk, start acceleration) of the four phases used.
+        let ph: [(f64, f64, f64); 4] = match self.case {
+            Case::PlateauAmax => [
+                (t[0], j, pr.a0),
+                (t[1], 0.0, amax),
+                (t[2], -j, amax),
+                (t[6], j, 0.0),
+            ],
+            Case::PlateauAmin => [
+                (t[0], j, pr.a0),
+                (t[2], -j, 0.0),
+                (t[5], 0.0, amin),
+                (t[6], j, amin),
+            ],
+            _ => [
+                (t[0], j, pr.a0),
+                (t[2], -j, amax),
+                (t[5], 0.0, amin),
+                (t[6], j, amin),
+            ],
+        };
+        let gain = ph.map(|(d, jk, a)| d * (a + jk * d * 0.5));
+        let own = ph.map(|(d, jk, a)| d * d * (a * 0.5 + jk * d * (1.0 / 6.0)));
+        let v1 = pr.v0 + gain[0];
+        let v2 = v1 + gain[1];
+        let v3 = v2 + gain[2];
+        (pr.v0 * ph[0].0 + v1 * ph[1].0)
+            + (v2 * ph[2].0 + v3 * ph[3].0)
+            + ((own[0] + own[1]) + (own[2] + own[3]))
     }
 
     /// The fixed-duration equation "total duration = td" as a polynomial in the parameter
