@@ -329,6 +329,34 @@ pub fn integrate_checked(
 ) -> Option<State> {
     let tv = rel * lim.vmax.abs().max(lim.vmin.abs());
     let ta = rel * lim.amax.abs().max(lim.amin.abs());
+    let (vhi, vlo, ahi, alo) = (lim.vmax + tv, lim.vmin - tv, lim.amax + ta, lim.amin - ta);
+    if !check_velocity || (start.v <= vhi && start.v >= vlo) {
+        // Common case: the start is within the limits; plain checks at every phase end and
+        // velocity extremum (the same checks as the general loop below).
+        if !(start.a <= ahi && start.a >= alo) {
+            return None;
+        }
+        let mut s = start;
+        for (&d, &j) in durations.iter().zip(jerks) {
+            if d <= 0.0 {
+                continue;
+            }
+            if j != 0.0 && check_velocity && s.a * (s.a + j * d) < 0.0 {
+                let tc = -s.a / j;
+                if tc > 0.0 && tc < d {
+                    let v = s.integrate(tc, j).v;
+                    if !(v <= vhi && v >= vlo) {
+                        return None;
+                    }
+                }
+            }
+            s = s.integrate(d, j);
+            if !(s.a <= ahi && s.a >= alo) || (check_velocity && !(s.v <= vhi && s.v >= vlo)) {
+                return None;
+            }
+        }
+        return Some(s);
+    }
     let vin = |v: f64| v <= lim.vmax + tv && v >= lim.vmin - tv;
     let aok = |a: f64| a <= lim.amax + ta && a >= lim.amin - ta;
     let v_start = start.v;

@@ -640,50 +640,73 @@ fn solve_vmax(pr: &Problem, goal: Goal, tol: &Tol) -> Option<(Shape, State)> {
         ..
     } = *pr;
     let j = lim.jmax;
+    let ij = 1.0 / j;
     let (amax, amin, vmax) = (lim.amax, lim.amin, lim.vmax);
     let mut t = [0.0; 7];
-    let a1sq = j * (vmax - v0) + a0 * a0 / 2.0;
+    let a1sq = j * (vmax - v0) + a0 * a0 * 0.5;
     if a1sq < 0.0 {
         return None;
     }
-    let a1 = a1sq.sqrt();
-    if a1 > amax {
-        t[0] = (amax - a0) / j;
-        t[1] = (vmax - v0 - (amax * amax - a0 * a0) / (2.0 * j) - amax * amax / (2.0 * j)) / amax;
-        t[2] = amax / j;
-    } else {
-        t[0] = (a1 - a0) / j;
-        t[2] = a1 / j;
-    }
-    let a2sq = j * (vmax - vf) + af * af / 2.0;
+    let a2sq = j * (vmax - vf) + af * af * 0.5;
     if a2sq < 0.0 {
         return None;
     }
-    let a2 = -a2sq.sqrt();
-    if a2 < amin {
-        t[4] = -amin / j;
-        t[5] = (vf - vmax + amin * amin / (2.0 * j) - (af * af - amin * amin) / (2.0 * j)) / amin;
-        t[6] = (af - amin) / j;
+    let a1 = a1sq.sqrt();
+    let peak = if a1 > amax {
+        t[0] = (amax - a0) * ij;
+        t[1] = (vmax - v0 - (2.0 * amax * amax - a0 * a0) * 0.5 * ij) / amax;
+        t[2] = amax * ij;
+        amax
     } else {
-        t[4] = -a2 / j;
-        t[6] = (af - a2) / j;
-    }
+        t[0] = (a1 - a0) * ij;
+        t[2] = a1 * ij;
+        a1
+    };
+    let a2 = -a2sq.sqrt();
+    let trough = if a2 < amin {
+        t[4] = -amin * ij;
+        t[5] = (vf - vmax + (2.0 * amin * amin - af * af) * 0.5 * ij) / amin;
+        t[6] = (af - amin) * ij;
+        amin
+    } else {
+        t[4] = -a2 * ij;
+        t[6] = (af - a2) * ij;
+        a2
+    };
     if t.iter().any(|x| *x < -tol.t) {
         return None;
     }
     match goal {
         Goal::Position => {
-            // End position of the shape without cruise (same integration as a profile).
-            let mut e = State::new(0.0, v0, a0);
-            for (ti, jk) in t.iter().zip(pr.jerks()) {
-                if *ti > 0.0 {
-                    e = e.integrate(*ti, jk);
-                }
-            }
-            t[3] = (pr.d - e.p) / vmax;
+            // End position of the shape without cruise, from independent per-phase terms
+            // (start accelerations known: a0, peak, peak, 0, trough, trough), see
+            // `CaseParam::p0`; phases of negative (rounding) duration are left out.
+            let ph = [
+                (t[0].max(0.0), j, a0),
+                (t[1].max(0.0), 0.0, peak),
+                (t[2].max(0.0), -j, peak),
+                (t[4].max(0.0), -j, 0.0),
+                (t[5].max(0.0), 0.0, trough),
+                (t[6].max(0.0), j, trough),
+            ];
+            let gain = ph.map(|(d, jk, a)| d * (a + jk * d * 0.5));
+            let own = ph.map(|(d, jk, a)| d * d * (a * 0.5 + jk * d * (1.0 / 6.0)));
+            let v1 = v0 + gain[0];
+            let v2 = v1 + gain[1];
+            let v3 = v2 + gain[2];
+            let v4 = v3 + gain[3];
+            let v5 = v4 + gain[4];
+            let p = (v0 * ph[0].0 + v1 * ph[1].0)
+                + (v2 * ph[2].0 + v3 * ph[3].0)
+                + (v4 * ph[4].0 + v5 * ph[5].0)
+                + ((own[0] + own[1]) + (own[2] + own[3]) + (own[4] + own[5]));
+            t[3] = (pr.d - p) / vmax;
         }
         Goal::Duration(td) => {
             t[3] = td - t.iter().sum::<f64>();
+            if t[3] < -tol.t {
+                return None;
+            }
         }
     }
     validate(pr, t, goal, tol)
