@@ -166,6 +166,29 @@ pub enum Goal {
     Duration(f64),
 }
 
+/// The parameter range `range` restricted to the union of a negative branch `neg` (if `neg_ok`)
+/// and a positive branch `pos` (if `pos_ok`), each widened by `margin`: the hull of the
+/// non-empty intersections, or None if there is none (the case has no valid shape).
+#[inline]
+fn tighten(
+    range: (f64, f64),
+    neg: (f64, f64),
+    neg_ok: bool,
+    pos: (f64, f64),
+    pos_ok: bool,
+    margin: f64,
+) -> Option<(f64, f64)> {
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for (ok, (a, b)) in [(neg_ok, neg), (pos_ok, pos)] {
+        let (a, b) = ((a - margin).max(range.0), (b + margin).min(range.1));
+        if ok && a <= b {
+            lo = lo.min(a);
+            hi = hi.max(b);
+        }
+    }
+    (lo <= hi).then_some((lo, hi))
+}
+
 /// A polynomial case of one problem: its parameter range and the constant of its plateau (or,
 /// for [`Case::Ramps`], `K = 2 j (vf - v0) + a0^2 - af^2`). The phase durations are closed-form
 /// functions of the parameter ([`CaseParam::durations`]).
@@ -242,11 +265,25 @@ impl CaseParam {
                 // parameter: trough a2; the plateau lasts (a2^2 / j + k) / amax.
                 let k = dv - (2.0 * amax * amax - a0 * a0 + af * af) / (2.0 * j);
                 let w = m * (amax - amin);
+                // Plateau >= 0: a2^2 >= -k j; for a negative trough the velocity peaks (at
+                // a = 0) at v1 + (a2^2 / j + k) + amax^2 / (2 j) <= vmax, v1 the velocity at
+                // amax: a2^2 <= j (vmax - v1 - k) - amax^2 / 2.
+                let v1 = v0 + (amax * amax - a0 * a0) / (2.0 * j);
+                let smin = (-k * j).max(0.0).sqrt();
+                let w2 = j * (lim.vmax - v1 - k) - 0.5 * amax * amax;
+                let (lo, hi) = tighten(
+                    (amin - w, af.min(amax) + w),
+                    (-w2.max(0.0).sqrt(), -smin),
+                    w2 >= smin * smin,
+                    (smin, f64::INFINITY),
+                    true,
+                    1e-6 * (amax - amin),
+                )?;
                 Some(CaseParam {
                     case,
                     k,
-                    lo: amin - w,
-                    hi: af.min(amax) + w,
+                    lo,
+                    hi,
                     ij: 1.0 / j,
                     ia: 1.0 / amax,
                 })
@@ -255,11 +292,23 @@ impl CaseParam {
                 // parameter: peak a1; the plateau lasts (k - a1^2 / j) / amin.
                 let k = dv - (-a0 * a0 - 2.0 * amin * amin + af * af) / (2.0 * j);
                 let w = m * (amax - amin);
+                // Plateau >= 0: a1^2 >= k j; for a positive peak the velocity peaks (at a = 0)
+                // at v0 + a1^2 / j - a0^2 / (2 j) <= vmax.
+                let smin = (k * j).max(0.0).sqrt();
+                let q = j * (lim.vmax - v0) + 0.5 * a0 * a0;
+                let (lo, hi) = tighten(
+                    (a0.max(amin) - w, amax + w),
+                    (f64::NEG_INFINITY, -smin),
+                    true,
+                    (smin, q.max(0.0).sqrt()),
+                    q >= smin * smin,
+                    1e-6 * (amax - amin),
+                )?;
                 Some(CaseParam {
                     case,
                     k,
-                    lo: a0.max(amin) - w,
-                    hi: amax + w,
+                    lo,
+                    hi,
                     ij: 1.0 / j,
                     ia: 1.0 / amin,
                 })
