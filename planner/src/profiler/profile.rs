@@ -401,6 +401,50 @@ pub fn integrate_checked(
     Some(s)
 }
 
+/// [`integrate_checked`] for a fixed number of phases (the shape solvers' seven), inlined so
+/// that the loop is unrolled with the jerk pattern known; the same checks and results.
+#[inline(always)]
+pub(crate) fn integrate_checked_fixed<const N: usize>(
+    start: State,
+    durations: &[f64; N],
+    jerks: &[f64; N],
+    lim: &Limits,
+    rel: f64,
+    check_velocity: bool,
+) -> Option<State> {
+    let tv = rel * lim.vmax.abs().max(lim.vmin.abs());
+    let ta = rel * lim.amax.abs().max(lim.amin.abs());
+    let (vhi, vlo, ahi, alo) = (lim.vmax + tv, lim.vmin - tv, lim.amax + ta, lim.amin - ta);
+    if check_velocity && !(start.v <= vhi && start.v >= vlo) {
+        // Start outside the velocity limits (after a brake): the general routine.
+        return integrate_checked(start, durations, jerks, lim, rel, check_velocity);
+    }
+    if !(start.a <= ahi && start.a >= alo) {
+        return None;
+    }
+    let mut s = start;
+    for i in 0..N {
+        let (d, j) = (durations[i], jerks[i]);
+        if d <= 0.0 {
+            continue;
+        }
+        if j != 0.0 && check_velocity && s.a * (s.a + j * d) < 0.0 {
+            let tc = -s.a / j;
+            if tc > 0.0 && tc < d {
+                let v = s.integrate(tc, j).v;
+                if !(v <= vhi && v >= vlo) {
+                    return None;
+                }
+            }
+        }
+        s = s.integrate(d, j);
+        if !(s.a <= ahi && s.a >= alo) || (check_velocity && !(s.v <= vhi && s.v >= vlo)) {
+            return None;
+        }
+    }
+    Some(s)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -32,7 +32,7 @@
 
 use super::limits::{Limits, State};
 use super::poly::{Poly, ROOTS_CAP};
-use super::profile::{integrate_checked, Profile};
+use super::profile::{integrate_checked_fixed, Profile};
 
 /// The sub-shapes of the UDDU family (see module doc).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -189,6 +189,29 @@ fn tighten(
     (lo <= hi).then_some((lo, hi))
 }
 
+/// The range `range` without the open interval `(c - sqrt(disc), c + sqrt(disc))` (shrunk by
+/// `margin`) where a monic quadratic with vertex `c` and reduced discriminant `disc` is
+/// negative: cut at an end it overlaps, unchanged if it lies inside (the hull is kept), None if
+/// it covers the whole range.
+#[inline]
+fn exclude(range: (f64, f64), c: f64, disc: f64, margin: f64) -> Option<(f64, f64)> {
+    if disc <= 0.0 {
+        return Some(range);
+    }
+    let h = disc.sqrt();
+    let (r1, r2) = (c - h + margin, c + h - margin);
+    let (lo, hi) = range;
+    if r1 >= r2 {
+        return Some(range);
+    }
+    match (r1 <= lo, r2 >= hi) {
+        (true, true) => None,
+        (true, false) => Some((lo.max(r2), hi)),
+        (false, true) => Some((lo, hi.min(r1))),
+        (false, false) => Some(range),
+    }
+}
+
 /// A polynomial case of one problem: its parameter range and the constant of its plateau (or,
 /// for [`Case::Ramps`], `K = 2 j (vf - v0) + a0^2 - af^2`). The phase durations are closed-form
 /// functions of the parameter ([`CaseParam::durations`]).
@@ -237,10 +260,15 @@ impl CaseParam {
                 if hi < lo {
                     return None;
                 }
+                // Non-negative ramps: a1 >= a0 is u^2 - 2 a0 u + K/2 >= 0 and a2 <= af is
+                // u^2 + 2 af u - K/2 >= 0; each excludes the open interval between its roots.
+                let e = 1e-6 * (amax - amin);
+                let (lo, hi) = exclude((lo.max(0.0), hi), a0, a0 * a0 - 0.5 * k, e)?;
+                let (lo, hi) = exclude((lo, hi), -af, af * af + 0.5 * k, e)?;
                 Some(CaseParam {
                     case,
                     k,
-                    lo: lo.max(0.0),
+                    lo,
                     hi,
                     ij: 1.0 / j,
                     ia: 0.0,
@@ -601,7 +629,7 @@ fn validate(pr: &Problem, mut t: [f64; 7], goal: Goal, tol: &Tol) -> Option<(Sha
         *ti = ti.max(0.0);
     }
     let start = State::new(0.0, pr.v0, pr.a0);
-    let e = integrate_checked(start, &t, &pr.jerks(), &pr.lim, 1e-9, true)?;
+    let e = integrate_checked_fixed(start, &t, &pr.jerks(), &pr.lim, 1e-9, true)?;
     if (e.v - pr.vf).abs() > tol.v || (e.a - pr.af).abs() > tol.a {
         return None;
     }
