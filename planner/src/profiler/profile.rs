@@ -253,35 +253,39 @@ impl Profile {
         // times): the merged durations of short high-jerk segments stay exact even deep into
         // a long profile.
         let ((at, aj), (bt, bj)) = (a, b);
-        let (an, bn) = (at.len(), bt.len());
-        let seg = |t: &[f64], i: usize| if i < t.len() { t[i] } else { 0.0 };
+        let (an, bn) = (at.len().min(aj.len()), bt.len().min(bj.len()));
+        let mu = 1.0 - lambda;
         let (mut i, mut k) = (0, 0);
-        let (mut ra, mut rb) = (seg(at, 0), seg(bt, 0));
-        while i < an || k < bn {
-            let dt = match (i < an, k < bn) {
-                (true, true) => ra.min(rb),
-                (true, false) => ra,
-                _ => rb,
-            };
-            let ja = if i < an { aj[i] } else { 0.0 };
-            let jb = if k < bn { bj[k] } else { 0.0 };
-            self.push(dt, lambda * ja + (1.0 - lambda) * jb);
-            if i < an {
-                if ra <= dt {
-                    i += 1;
-                    ra = seg(at, i);
-                } else {
-                    ra -= dt;
-                }
+        let (mut ra, mut rb) = (
+            if an > 0 { at[0] } else { 0.0 },
+            if bn > 0 { bt[0] } else { 0.0 },
+        );
+        while i < an && k < bn {
+            let dt = ra.min(rb);
+            self.push(dt, lambda * aj[i] + mu * bj[k]);
+            if ra <= dt {
+                i += 1;
+                ra = if i < an { at[i] } else { 0.0 };
+            } else {
+                ra -= dt;
             }
-            if k < bn {
-                if rb <= dt {
-                    k += 1;
-                    rb = seg(bt, k);
-                } else {
-                    rb -= dt;
-                }
+            if rb <= dt {
+                k += 1;
+                rb = if k < bn { bt[k] } else { 0.0 };
+            } else {
+                rb -= dt;
             }
+        }
+        // The longer list's tail (the other's jerk is 0 there).
+        while i < an {
+            self.push(ra, lambda * aj[i] + mu * 0.0);
+            i += 1;
+            ra = if i < an { at[i] } else { 0.0 };
+        }
+        while k < bn {
+            self.push(rb, lambda * 0.0 + mu * bj[k]);
+            k += 1;
+            rb = if k < bn { bt[k] } else { 0.0 };
         }
     }
 
