@@ -74,6 +74,8 @@ pub struct Problem {
     pub af: f64,
     /// Limits.
     pub lim: Limits,
+    /// Reciprocals `1 / jmax`, `1 / amax`, `1 / amin`, `1 / vmax` (divisions done once).
+    inv: [f64; 4],
 }
 
 impl Problem {
@@ -86,6 +88,12 @@ impl Problem {
             vf: target.v,
             af: target.a,
             lim: *lim,
+            inv: [
+                1.0 / lim.jmax,
+                1.0 / lim.amax,
+                1.0 / lim.amin,
+                1.0 / lim.vmax,
+            ],
         }
     }
 
@@ -98,6 +106,13 @@ impl Problem {
             vf: -self.vf,
             af: -self.af,
             lim: self.lim.mirrored(),
+            // amax' = -amin, amin' = -amax, vmax' = -vmin.
+            inv: [
+                self.inv[0],
+                -self.inv[2],
+                -self.inv[1],
+                -1.0 / self.lim.vmin,
+            ],
         }
     }
 
@@ -270,12 +285,12 @@ impl CaseParam {
                     k,
                     lo,
                     hi,
-                    ij: 1.0 / j,
+                    ij: pr.inv[0],
                     ia: 0.0,
                 })
             }
             Case::PlateauAmax | Case::PlateauBoth
-                if v0 + (amax * amax - a0 * a0) / (2.0 * j)
+                if v0 + (amax * amax - a0 * a0) * (0.5 * pr.inv[0])
                     > lim.vmax + m * (lim.vmax - lim.vmin) =>
             {
                 // Reaching amax alone already exceeds vmax (the velocity keeps rising on the
@@ -283,7 +298,7 @@ impl CaseParam {
                 None
             }
             Case::PlateauAmin | Case::PlateauBoth
-                if vf - (af * af - amin * amin) / (2.0 * j)
+                if vf - (af * af - amin * amin) * (0.5 * pr.inv[0])
                     < lim.vmin - m * (lim.vmax - lim.vmin) =>
             {
                 // Mirror: the final ramp up from amin would start below vmin.
@@ -291,12 +306,12 @@ impl CaseParam {
             }
             Case::PlateauAmax => {
                 // parameter: trough a2; the plateau lasts (a2^2 / j + k) / amax.
-                let k = dv - (2.0 * amax * amax - a0 * a0 + af * af) / (2.0 * j);
+                let k = dv - (2.0 * amax * amax - a0 * a0 + af * af) * (0.5 * pr.inv[0]);
                 let w = m * (amax - amin);
                 // Plateau >= 0: a2^2 >= -k j; for a negative trough the velocity peaks (at
                 // a = 0) at v1 + (a2^2 / j + k) + amax^2 / (2 j) <= vmax, v1 the velocity at
                 // amax: a2^2 <= j (vmax - v1 - k) - amax^2 / 2.
-                let v1 = v0 + (amax * amax - a0 * a0) / (2.0 * j);
+                let v1 = v0 + (amax * amax - a0 * a0) * (0.5 * pr.inv[0]);
                 let smin = (-k * j).max(0.0).sqrt();
                 let w2 = j * (lim.vmax - v1 - k) - 0.5 * amax * amax;
                 let (lo, hi) = tighten(
@@ -312,13 +327,13 @@ impl CaseParam {
                     k,
                     lo,
                     hi,
-                    ij: 1.0 / j,
-                    ia: 1.0 / amax,
+                    ij: pr.inv[0],
+                    ia: pr.inv[1],
                 })
             }
             Case::PlateauAmin => {
                 // parameter: peak a1; the plateau lasts (k - a1^2 / j) / amin.
-                let k = dv - (-a0 * a0 - 2.0 * amin * amin + af * af) / (2.0 * j);
+                let k = dv - (-a0 * a0 - 2.0 * amin * amin + af * af) * (0.5 * pr.inv[0]);
                 let w = m * (amax - amin);
                 // Plateau >= 0: a1^2 >= k j; for a positive peak the velocity peaks (at a = 0)
                 // at v0 + a1^2 / j - a0^2 / (2 j) <= vmax.
@@ -337,28 +352,29 @@ impl CaseParam {
                     k,
                     lo,
                     hi,
-                    ij: 1.0 / j,
-                    ia: 1.0 / amin,
+                    ij: pr.inv[0],
+                    ia: pr.inv[2],
                 })
             }
             Case::PlateauBoth => {
                 // parameter: amax plateau length z; the amin plateau lasts (k - amax z) / amin.
-                let k =
-                    dv - (2.0 * amax * amax - a0 * a0 - 2.0 * amin * amin + af * af) / (2.0 * j);
-                let v1 = v0 + (amax * amax - a0 * a0) / (2.0 * j);
-                let zmax = (lim.vmax - v1 - amax * amax / (2.0 * j)) / amax;
-                let zmin = (k / amax).max(0.0);
-                if zmax < -m * (lim.vmax - lim.vmin) / amax {
+                let hij = 0.5 * pr.inv[0];
+                let iamax = pr.inv[1];
+                let k = dv - (2.0 * amax * amax - a0 * a0 - 2.0 * amin * amin + af * af) * hij;
+                let v1 = v0 + (amax * amax - a0 * a0) * hij;
+                let zmax = (lim.vmax - v1 - amax * amax * hij) * iamax;
+                let zmin = (k * iamax).max(0.0);
+                let w = m * ((lim.vmax - lim.vmin) * iamax);
+                if zmax < -w {
                     return None;
                 }
-                let w = m * ((lim.vmax - lim.vmin) / amax);
                 Some(CaseParam {
                     case,
                     k,
                     lo: zmin - w,
                     hi: zmax.max(zmin) + w,
-                    ij: 1.0 / j,
-                    ia: 1.0 / amin,
+                    ij: pr.inv[0],
+                    ia: pr.inv[2],
                 })
             }
             Case::PlateauVmax => None,
@@ -426,6 +442,7 @@ impl CaseParam {
             vf,
             af,
             lim,
+            ..
         } = *pr;
         let j = lim.jmax;
         let (amax, amin) = (lim.amax, lim.amin);
@@ -518,29 +535,29 @@ impl CaseParam {
     /// (degree <= 2; for `Ramps` the homogenised one divided by `u`, which is linear).
     fn duration_equation(&self, pr: &Problem, td: f64) -> Poly {
         let lim = &pr.lim;
-        let j = lim.jmax;
         let (amax, amin) = (lim.amax, lim.amin);
+        let [ij, iamax, iamin, _] = pr.inv;
         let (a0, af, k) = (pr.a0, pr.af, self.k);
         match self.case {
             // (2u + af - a0) / j = td
-            Case::Ramps => Poly::linear((af - a0) / j - td, 2.0 / j),
+            Case::Ramps => Poly::linear((af - a0) * ij - td, 2.0 * ij),
             Case::PlateauAmax => {
-                let mut p = Poly::constant((amax - a0) / j + k / amax + (amax + af) / j - td);
+                let mut p = Poly::constant((amax - a0) * ij + k * iamax + (amax + af) * ij - td);
                 p.deg = 2;
-                p.c[1] = -2.0 / j;
-                p.c[2] = 1.0 / (j * amax);
+                p.c[1] = -2.0 * ij;
+                p.c[2] = ij * iamax;
                 p
             }
             Case::PlateauAmin => {
-                let mut p = Poly::constant((af - a0 - 2.0 * amin) / j + k / amin - td);
+                let mut p = Poly::constant((af - a0 - 2.0 * amin) * ij + k * iamin - td);
                 p.deg = 2;
-                p.c[1] = 2.0 / j;
-                p.c[2] = -1.0 / (j * amin);
+                p.c[1] = 2.0 * ij;
+                p.c[2] = -ij * iamin;
                 p
             }
             Case::PlateauBoth => Poly::linear(
-                (amax - a0) / j + (amax - amin) / j + k / amin + (af - amin) / j - td,
-                1.0 - amax / amin,
+                (amax - a0) * ij + (amax - amin) * ij + k * iamin + (af - amin) * ij - td,
+                1.0 - amax * iamin,
             ),
             Case::PlateauVmax => Poly::constant(1.0),
         }
@@ -616,7 +633,7 @@ fn tolerances(pr: &Problem) -> Tol {
         p: 1e-9 * pr.d.abs().max(1.0),
         v: 1e-9 * vs.max(1.0),
         a: 1e-9 * as_.max(1.0),
-        t: 1e-10 * (vs / as_ + as_ / l.jmax).max(1.0),
+        t: 1e-10 * (vs / as_ + as_ * pr.inv[0]).max(1.0),
     }
 }
 
@@ -717,7 +734,7 @@ fn solve_vmax(pr: &Problem, goal: Goal, tol: &Tol) -> Option<(Shape, State)> {
         ..
     } = *pr;
     let j = lim.jmax;
-    let ij = 1.0 / j;
+    let [ij, iamax, iamin, ivmax] = pr.inv;
     let (amax, amin, vmax) = (lim.amax, lim.amin, lim.vmax);
     let mut t = [0.0; 7];
     let a1sq = j * (vmax - v0) + a0 * a0 * 0.5;
@@ -731,7 +748,7 @@ fn solve_vmax(pr: &Problem, goal: Goal, tol: &Tol) -> Option<(Shape, State)> {
     let a1 = a1sq.sqrt();
     let peak = if a1 > amax {
         t[0] = (amax - a0) * ij;
-        t[1] = (vmax - v0 - (2.0 * amax * amax - a0 * a0) * 0.5 * ij) / amax;
+        t[1] = (vmax - v0 - (2.0 * amax * amax - a0 * a0) * 0.5 * ij) * iamax;
         t[2] = amax * ij;
         amax
     } else {
@@ -742,7 +759,7 @@ fn solve_vmax(pr: &Problem, goal: Goal, tol: &Tol) -> Option<(Shape, State)> {
     let a2 = -a2sq.sqrt();
     let trough = if a2 < amin {
         t[4] = -amin * ij;
-        t[5] = (vf - vmax + (2.0 * amin * amin - af * af) * 0.5 * ij) / amin;
+        t[5] = (vf - vmax + (2.0 * amin * amin - af * af) * 0.5 * ij) * iamin;
         t[6] = (af - amin) * ij;
         amin
     } else {
@@ -777,7 +794,7 @@ fn solve_vmax(pr: &Problem, goal: Goal, tol: &Tol) -> Option<(Shape, State)> {
                 + (v2 * ph[2].0 + v3 * ph[3].0)
                 + (v4 * ph[4].0 + v5 * ph[5].0)
                 + ((own[0] + own[1]) + (own[2] + own[3]) + (own[4] + own[5]));
-            t[3] = (pr.d - p) / vmax;
+            t[3] = (pr.d - p) * ivmax;
         }
         Goal::Duration(td) => {
             t[3] = td - t.iter().sum::<f64>();
