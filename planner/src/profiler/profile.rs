@@ -4,6 +4,7 @@
 //! zero jerk (constant acceleration), which is what is evaluated past the duration.
 
 use super::limits::{Limits, State};
+use std::mem::MaybeUninit;
 
 /// Maximal number of constant-jerk segments of a [`Profile`] (brake 2 + blend of two 7-phase
 /// profiles: at most 13 segments, 14 if their durations differ by rounding; with margin).
@@ -11,17 +12,18 @@ pub const MAX_SEGMENTS: usize = 18;
 
 /// Piecewise-constant-jerk trajectory of one degree of freedom.
 ///
-/// Compact (about 330 bytes): the segments, the start and final states and the duration. The
+/// Compact (about 350 bytes): the segments, the start and final states and the duration. The
 /// state inside the profile is integrated from the start on demand, with the same operations in
 /// the same order as when the profile was built, so the results are identical to caching the
-/// state at every segment start.
-#[derive(Clone, Copy, Debug)]
+/// state at every segment start. The segment arrays are initialised only up to the length (an
+/// empty profile, e.g. for every unused DoF of a trajectory, costs no array initialisation).
+#[derive(Clone, Copy)]
 pub struct Profile {
     n: usize,
-    /// Segment durations in s.
-    t: [f64; MAX_SEGMENTS],
-    /// Segment jerks in u/s^3.
-    j: [f64; MAX_SEGMENTS],
+    /// Segment durations in s; `t[..n]` initialised.
+    t: [MaybeUninit<f64>; MAX_SEGMENTS],
+    /// Segment jerks in u/s^3; `j[..n]` initialised.
+    j: [MaybeUninit<f64>; MAX_SEGMENTS],
     /// Start state.
     start: State,
     /// Final state (after the last segment).
@@ -43,17 +45,44 @@ pub struct PositionExtrema {
     pub t_max: f64,
 }
 
+impl std::fmt::Debug for Profile {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Profile")
+            .field("durations", &self.ts())
+            .field("jerks", &self.js())
+            .field("start", &self.start)
+            .field("end", &self.end)
+            .field("duration", &self.dur)
+            .finish()
+    }
+}
+
 impl Profile {
     /// An empty profile (duration 0) starting (and ending) at `start`.
     pub fn new(start: State) -> Self {
         Profile {
             n: 0,
-            t: [0.0; MAX_SEGMENTS],
-            j: [0.0; MAX_SEGMENTS],
+            t: [MaybeUninit::uninit(); MAX_SEGMENTS],
+            j: [MaybeUninit::uninit(); MAX_SEGMENTS],
             start,
             end: start,
             dur: 0.0,
         }
+    }
+
+    /// The segment durations (s).
+    #[inline]
+    fn ts(&self) -> &[f64] {
+        // SAFETY: `t[..n]` is initialised (`push` and `copy_from` write an entry before the
+        // length covers it); `MaybeUninit<f64>` has the layout of `f64`.
+        unsafe { std::slice::from_raw_parts(self.t.as_ptr().cast::<f64>(), self.n) }
+    }
+
+    /// The segment jerks (u/s^3).
+    #[inline]
+    fn js(&self) -> &[f64] {
+        // SAFETY: as for `ts`.
+        unsafe { std::slice::from_raw_parts(self.j.as_ptr().cast::<f64>(), self.n) }
     }
 
     /// Appends a segment of `dur` seconds at jerk `jerk`. Non-positive durations are skipped.
@@ -67,8 +96,8 @@ impl Profile {
             return false;
         }
         let i = self.n;
-        self.t[i] = dur;
-        self.j[i] = jerk;
+        self.t[i] = MaybeUninit::new(dur);
+        self.j[i] = MaybeUninit::new(jerk);
         self.end = self.end.integrate(dur, jerk);
         self.dur += dur;
         self.n += 1;
@@ -99,7 +128,11 @@ impl Profile {
 
     /// Appends all segments of `other` (whose start state is assumed to equal this end state).
     pub fn append(&mut self, other: &Profile) -> bool {
-        (0..other.n).all(|i| self.push(other.t[i], other.j[i]))
+        other
+            .ts()
+            .iter()
+            .zip(other.js())
+            .all(|(t, j)| self.push(*t, *j))
     }
 
     /// Number of segments.
@@ -114,7 +147,11 @@ impl Profile {
 
     /// Segment `i` as (duration s, jerk u/s^3).
     pub fn segment(&self, i: usize) -> (f64, f64) {
-        (self.t[i], self.j[i])
+        if i < self.n {
+            (self.ts()[i], self.js()[i])
+        } else {
+            (0.0, 0.0)
+        }
     }
 
     /// Duration in s.
@@ -136,19 +173,20 @@ impl Profile {
     /// duration the profile continues with zero jerk.
     pub fn at(&self, t: f64) -> (State, f64) {
         if t <= 0.0 {
-            return (self.start, if self.n > 0 { self.j[0] } else { 0.0 });
+            return (self.start, if self.n > 0 { self.js()[0] } else { 0.0 });
         }
         if t >= self.dur {
             return (self.end.integrate(t - self.dur, 0.0), 0.0);
         }
         // Walk the segments, integrating as `push` did (identical segment start states).
+        let (ts, js) = (self.ts(), self.js());
         let (mut s, mut t0) = (self.start, 0.0);
         for i in 0..self.n {
-            let t1 = t0 + self.t[i];
+            let t1 = t0 + ts[i];
             if t1 > t || i + 1 == self.n {
-                return (s.integrate(t - t0, self.j[i]), self.j[i]);
+                return (s.integrate(t - t0, js[i]), js[i]);
             }
-            s = s.integrate(self.t[i], self.j[i]);
+            s = s.integrate(ts[i], js[i]);
             t0 = t1;
         }
         (s, 0.0)
@@ -174,12 +212,12 @@ impl Profile {
         }
         let mut s0 = self.start;
         for i in 0..first {
-            s0 = s0.integrate(self.t[i], self.j[i]);
+            s0 = s0.integrate(self.ts()[i], self.js()[i]);
         }
         integrate_checked(
             s0,
-            &self.t[first..self.n],
-            &self.j[first..self.n],
+            &self.ts()[first..],
+            &self.js()[first..],
             lim,
             rel,
             check_velocity,
@@ -208,7 +246,7 @@ impl Profile {
         };
         let (mut s, mut t0) = (self.start, 0.0);
         for i in 0..self.n {
-            let (j, d) = (self.j[i], self.t[i]);
+            let (j, d) = (self.js()[i], self.ts()[i]);
             // v(t) = s.v + s.a t + j t^2 / 2 = 0
             let mut roots = [f64::NAN; 2];
             if j.abs() > 0.0 {
@@ -238,11 +276,7 @@ impl Profile {
     /// every time. Limits that both respect are respected by the blend (they are convex).
     pub fn blend(a: &Profile, b: &Profile, lambda: f64) -> Profile {
         let mut r = Profile::new(a.start());
-        r.push_blend(
-            (&a.t[..a.n], &a.j[..a.n]),
-            (&b.t[..b.n], &b.j[..b.n]),
-            lambda,
-        );
+        r.push_blend((a.ts(), a.js()), (b.ts(), b.js()), lambda);
         r
     }
 
@@ -294,7 +328,7 @@ impl Profile {
         let s = self.start;
         let mut r = Profile::new(State::new(s.p * k, s.v * k, s.a * k));
         for i in 0..self.n {
-            r.push(self.t[i], self.j[i] * k);
+            r.push(self.ts()[i], self.js()[i] * k);
         }
         r
     }
@@ -304,7 +338,7 @@ impl Profile {
         let s = self.start;
         let mut r = Profile::new(State::new(p0, s.v, s.a));
         for i in 0..self.n {
-            r.push(self.t[i], self.j[i]);
+            r.push(self.ts()[i], self.js()[i]);
         }
         r
     }
