@@ -503,6 +503,19 @@ mod tests {
     }
 
     #[test]
+    fn segments_past_the_length_read_as_zero() {
+        let mut p = Profile::new(State::new(1.0, 0.0, 0.0));
+        assert_eq!(p.segment(0), (0.0, 0.0));
+        p.push(0.5, 2.0);
+        let mut q = Profile::new(State::default());
+        q.copy_from(&p);
+        assert_eq!(q.segment(0), (0.5, 2.0));
+        assert_eq!(q.segment(1), (0.0, 0.0));
+        assert_eq!(q.segment(MAX_SEGMENTS - 1), (0.0, 0.0));
+        assert!(format!("{q:?}").contains("durations: [0.5]"));
+    }
+
+    #[test]
     fn blend_is_convex_combination() {
         let mut a = Profile::new(State::new(0.0, 0.0, 0.0));
         a.push(1.0, 1.0);
