@@ -117,15 +117,6 @@ impl Profile {
         self.dur = other.dur;
     }
 
-    /// Resets this profile to an empty one starting at `start` (no copy of the arrays).
-    #[inline]
-    pub fn reset(&mut self, start: State) {
-        self.n = 0;
-        self.start = start;
-        self.end = start;
-        self.dur = 0.0;
-    }
-
     /// Appends all segments of `other` (whose start state is assumed to equal this end state).
     pub fn append(&mut self, other: &Profile) -> bool {
         other
