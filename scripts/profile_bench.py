@@ -7,6 +7,10 @@ pcr-planner: `cargo bench -p pcr-planner --bench profiler` with PROFILE_BENCH_CA
 times `calculate()` per case (median of 21 runs).
 
 Usage: profile_bench.py [--cases N] [--seed S] [--repeats R] [--write-cases PATH]
+       profile_bench.py --ruckig-loop PATH [--repeats R]
+
+--ruckig-loop only calls ruckig's `calculate` R times per case of a cases file (for counting its
+instructions with callgrind, see BENCHMARKS.md).
 """
 
 import argparse
@@ -72,7 +76,19 @@ def main():
     ap.add_argument("--repeats", type=int, default=21)
     ap.add_argument("--write-cases", metavar="PATH",
                     help="only write the cases file (for instruction counting) and exit")
+    ap.add_argument("--ruckig-loop", metavar="PATH",
+                    help="only call ruckig's calculate --repeats times per case of PATH and exit")
     args = ap.parse_args()
+
+    if args.ruckig_loop:
+        cases = json.loads(Path(args.ruckig_loop).read_text())["cases"]
+        inputs = [pc.ruckig_input(c) for c in cases]
+        otg = Ruckig(3)
+        traj = pc.Trajectory(3)
+        for inp in inputs:
+            for _ in range(args.repeats):
+                otg.calculate(inp, traj)
+        return 0
 
     cases = gen_cases(args.cases, args.seed)
     if args.write_cases:

@@ -43,6 +43,12 @@ fn brake_velocity_down(s: &State, lim: &Limits, out: &mut Profile) {
     }
 }
 
+/// True if [`brake_upper`] would brake.
+fn needs_upper(s: &State, lim: &Limits) -> bool {
+    let ta = EPS * lim.amax.abs().max(1.0);
+    s.a > lim.amax + ta || (exceeds_vmax(s, lim) && s.a >= lim.amin - ta)
+}
+
 /// Upper-side brake (see module doc); returns true if anything was done.
 fn brake_upper(s: &State, lim: &Limits, out: &mut Profile) -> bool {
     let ta = EPS * lim.amax.abs().max(1.0);
@@ -74,6 +80,10 @@ fn brake_upper(s: &State, lim: &Limits, out: &mut Profile) -> bool {
 /// Brake pre-trajectory for the position interface. The returned profile is empty if the state
 /// is within the limits.
 pub fn position_brake(s: State, lim: &Limits) -> Profile {
+    // Fast path (the usual case): neither side needs a brake.
+    if !needs_upper(&s, lim) && !needs_upper(&s.neg(), &lim.mirrored()) {
+        return Profile::new(s);
+    }
     // With a negative acceleration the lower side is the one that matters first (an upper
     // violation resolves itself), and vice versa.
     let lower_first = s.a < 0.0;

@@ -24,8 +24,8 @@ impl State {
     #[inline]
     pub fn integrate(&self, t: f64, j: f64) -> State {
         State {
-            p: self.p + t * (self.v + t * (self.a / 2.0 + t * j / 6.0)),
-            v: self.v + t * (self.a + t * j / 2.0),
+            p: self.p + t * (self.v + t * (self.a * 0.5 + t * j * (1.0 / 6.0))),
+            v: self.v + t * (self.a + t * j * 0.5),
             a: self.a + t * j,
         }
     }

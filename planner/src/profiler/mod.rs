@@ -108,9 +108,21 @@ impl Input {
         }
         for i in 0..self.dofs {
             let lim = &self.limits[i];
-            limits::validate_state(&self.current[i], "current", i)?;
-            limits::validate_state(&self.target[i], "target", i)?;
-            lim.validate(i)?;
+            let (c, t) = (&self.current[i], &self.target[i]);
+            // Fast path: everything finite and the limit signs right (then the detailed
+            // checks below cannot fail); otherwise they name the first problem.
+            let sane = (c.p + c.v + c.a + t.p + t.v + t.a).is_finite()
+                && lim.vmax > 0.0
+                && lim.vmin < 0.0
+                && lim.amax > 0.0
+                && lim.amin < 0.0
+                && lim.jmax > 0.0
+                && (lim.vmax - lim.vmin + lim.amax - lim.amin + lim.jmax).is_finite();
+            if !sane {
+                limits::validate_state(c, "current", i)?;
+                limits::validate_state(t, "target", i)?;
+                lim.validate(i)?;
+            }
             let t = &self.target[i];
             if self.control_interface == ControlInterface::Position
                 && (t.v > lim.vmax || t.v < lim.vmin)

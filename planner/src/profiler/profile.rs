@@ -4,23 +4,32 @@
 //! zero jerk (constant acceleration), which is what is evaluated past the duration.
 
 use super::limits::{Limits, State};
+use std::mem::MaybeUninit;
 
 /// Maximal number of constant-jerk segments of a [`Profile`] (brake 2 + blend of two 7-phase
-/// profiles 14, with margin).
-pub const MAX_SEGMENTS: usize = 24;
+/// profiles: at most 13 segments, 14 if their durations differ by rounding; with margin).
+pub const MAX_SEGMENTS: usize = 18;
 
 /// Piecewise-constant-jerk trajectory of one degree of freedom.
-#[derive(Clone, Copy, Debug)]
+///
+/// Compact (about 350 bytes): the segments, the start and final states and the duration. The
+/// state inside the profile is integrated from the start on demand, with the same operations in
+/// the same order as when the profile was built, so the results are identical to caching the
+/// state at every segment start. The segment arrays are initialised only up to the length (an
+/// empty profile, e.g. for every unused DoF of a trajectory, costs no array initialisation).
+#[derive(Clone, Copy)]
 pub struct Profile {
     n: usize,
-    /// Segment durations in s.
-    t: [f64; MAX_SEGMENTS],
-    /// Segment jerks in u/s^3.
-    j: [f64; MAX_SEGMENTS],
-    /// State at the start of each segment; `s[n]` is the final state.
-    s: [State; MAX_SEGMENTS + 1],
-    /// Start time of each segment in s; `t0[n]` is the duration.
-    t0: [f64; MAX_SEGMENTS + 1],
+    /// Segment durations in s; `t[..n]` initialised.
+    t: [MaybeUninit<f64>; MAX_SEGMENTS],
+    /// Segment jerks in u/s^3; `j[..n]` initialised.
+    j: [MaybeUninit<f64>; MAX_SEGMENTS],
+    /// Start state.
+    start: State,
+    /// Final state (after the last segment).
+    end: State,
+    /// Duration in s (sum of the segment durations, accumulated in order).
+    dur: f64,
 }
 
 /// Position extrema of one DoF over a time interval.
@@ -36,20 +45,49 @@ pub struct PositionExtrema {
     pub t_max: f64,
 }
 
+impl std::fmt::Debug for Profile {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Profile")
+            .field("durations", &self.ts())
+            .field("jerks", &self.js())
+            .field("start", &self.start)
+            .field("end", &self.end)
+            .field("duration", &self.dur)
+            .finish()
+    }
+}
+
 impl Profile {
     /// An empty profile (duration 0) starting (and ending) at `start`.
     pub fn new(start: State) -> Self {
         Profile {
             n: 0,
-            t: [0.0; MAX_SEGMENTS],
-            j: [0.0; MAX_SEGMENTS],
-            s: [start; MAX_SEGMENTS + 1],
-            t0: [0.0; MAX_SEGMENTS + 1],
+            t: [MaybeUninit::uninit(); MAX_SEGMENTS],
+            j: [MaybeUninit::uninit(); MAX_SEGMENTS],
+            start,
+            end: start,
+            dur: 0.0,
         }
+    }
+
+    /// The segment durations (s).
+    #[inline]
+    fn ts(&self) -> &[f64] {
+        // SAFETY: `t[..n]` is initialised (`push` and `copy_from` write an entry before the
+        // length covers it); `MaybeUninit<f64>` has the layout of `f64`.
+        unsafe { std::slice::from_raw_parts(self.t.as_ptr().cast::<f64>(), self.n) }
+    }
+
+    /// The segment jerks (u/s^3).
+    #[inline]
+    fn js(&self) -> &[f64] {
+        // SAFETY: as for `ts`.
+        unsafe { std::slice::from_raw_parts(self.j.as_ptr().cast::<f64>(), self.n) }
     }
 
     /// Appends a segment of `dur` seconds at jerk `jerk`. Non-positive durations are skipped.
     /// Returns false if the capacity is exhausted.
+    #[inline]
     pub fn push(&mut self, dur: f64, jerk: f64) -> bool {
         if dur <= 0.0 {
             return true;
@@ -58,28 +96,34 @@ impl Profile {
             return false;
         }
         let i = self.n;
-        self.t[i] = dur;
-        self.j[i] = jerk;
-        self.s[i + 1] = self.s[i].integrate(dur, jerk);
-        self.t0[i + 1] = self.t0[i] + dur;
+        self.t[i] = MaybeUninit::new(dur);
+        self.j[i] = MaybeUninit::new(jerk);
+        self.end = self.end.integrate(dur, jerk);
+        self.dur += dur;
         self.n += 1;
         true
     }
 
     /// Makes this profile a copy of `other`, copying only the used entries (cheaper than an
     /// assignment of the whole fixed-capacity arrays; entries past the length are never read).
+    #[inline]
     pub fn copy_from(&mut self, other: &Profile) {
         let n = other.n;
         self.n = n;
         self.t[..n].copy_from_slice(&other.t[..n]);
         self.j[..n].copy_from_slice(&other.j[..n]);
-        self.s[..=n].copy_from_slice(&other.s[..=n]);
-        self.t0[..=n].copy_from_slice(&other.t0[..=n]);
+        self.start = other.start;
+        self.end = other.end;
+        self.dur = other.dur;
     }
 
     /// Appends all segments of `other` (whose start state is assumed to equal this end state).
     pub fn append(&mut self, other: &Profile) -> bool {
-        (0..other.n).all(|i| self.push(other.t[i], other.j[i]))
+        other
+            .ts()
+            .iter()
+            .zip(other.js())
+            .all(|(t, j)| self.push(*t, *j))
     }
 
     /// Number of segments.
@@ -94,47 +138,49 @@ impl Profile {
 
     /// Segment `i` as (duration s, jerk u/s^3).
     pub fn segment(&self, i: usize) -> (f64, f64) {
-        (self.t[i], self.j[i])
+        if i < self.n {
+            (self.ts()[i], self.js()[i])
+        } else {
+            (0.0, 0.0)
+        }
     }
 
     /// Duration in s.
     pub fn duration(&self) -> f64 {
-        self.t0[self.n]
+        self.dur
     }
 
     /// Start state.
     pub fn start(&self) -> State {
-        self.s[0]
+        self.start
     }
 
     /// Final state (at [`Profile::duration`]).
     pub fn end(&self) -> State {
-        self.s[self.n]
+        self.end
     }
 
     /// State and jerk at time `t` (s). Before 0 the start state is returned; after the
     /// duration the profile continues with zero jerk.
     pub fn at(&self, t: f64) -> (State, f64) {
         if t <= 0.0 {
-            return (self.s[0], if self.n > 0 { self.j[0] } else { 0.0 });
+            return (self.start, if self.n > 0 { self.js()[0] } else { 0.0 });
         }
-        if t >= self.t0[self.n] {
-            return (self.s[self.n].integrate(t - self.t0[self.n], 0.0), 0.0);
+        if t >= self.dur {
+            return (self.end.integrate(t - self.dur, 0.0), 0.0);
         }
-        // Binary search of the segment containing t.
-        let (mut lo, mut hi) = (0, self.n);
-        while hi - lo > 1 {
-            let mid = (lo + hi) / 2;
-            if self.t0[mid] <= t {
-                lo = mid;
-            } else {
-                hi = mid;
+        // Walk the segments, integrating as `push` did (identical segment start states).
+        let (ts, js) = (self.ts(), self.js());
+        let (mut s, mut t0) = (self.start, 0.0);
+        for i in 0..self.n {
+            let t1 = t0 + ts[i];
+            if t1 > t || i + 1 == self.n {
+                return (s.integrate(t - t0, js[i]), js[i]);
             }
+            s = s.integrate(ts[i], js[i]);
+            t0 = t1;
         }
-        (
-            self.s[lo].integrate(t - self.t0[lo], self.j[lo]),
-            self.j[lo],
-        )
+        (s, 0.0)
     }
 
     /// True if velocity and acceleration stay within `lim` (widened by `rel` times the limit
@@ -155,10 +201,14 @@ impl Profile {
         if first >= self.n {
             return true;
         }
+        let mut s0 = self.start;
+        for i in 0..first {
+            s0 = s0.integrate(self.ts()[i], self.js()[i]);
+        }
         integrate_checked(
-            self.s[first],
-            &self.t[first..self.n],
-            &self.j[first..self.n],
+            s0,
+            &self.ts()[first..],
+            &self.js()[first..],
             lim,
             rel,
             check_velocity,
@@ -168,7 +218,7 @@ impl Profile {
 
     /// Position extrema over `[0, duration]`.
     pub fn position_extrema(&self) -> PositionExtrema {
-        let s0 = self.s[0];
+        let s0 = self.start;
         let mut ex = PositionExtrema {
             min: s0.p,
             t_min: 0.0,
@@ -185,8 +235,9 @@ impl Profile {
                 ex.t_max = t;
             }
         };
+        let (mut s, mut t0) = (self.start, 0.0);
         for i in 0..self.n {
-            let (s, j, d) = (self.s[i], self.j[i], self.t[i]);
+            let (j, d) = (self.js()[i], self.ts()[i]);
             // v(t) = s.v + s.a t + j t^2 / 2 = 0
             let mut roots = [f64::NAN; 2];
             if j.abs() > 0.0 {
@@ -200,10 +251,12 @@ impl Profile {
             }
             for r in roots {
                 if r > 0.0 && r < d {
-                    see(s.integrate(r, j).p, self.t0[i] + r);
+                    see(s.integrate(r, j).p, t0 + r);
                 }
             }
-            see(self.s[i + 1].p, self.t0[i + 1]);
+            s = s.integrate(d, j);
+            t0 += d;
+            see(s.p, t0);
         }
         ex
     }
@@ -214,11 +267,7 @@ impl Profile {
     /// every time. Limits that both respect are respected by the blend (they are convex).
     pub fn blend(a: &Profile, b: &Profile, lambda: f64) -> Profile {
         let mut r = Profile::new(a.start());
-        r.push_blend(
-            (&a.t[..a.n], &a.j[..a.n]),
-            (&b.t[..b.n], &b.j[..b.n]),
-            lambda,
-        );
+        r.push_blend((a.ts(), a.js()), (b.ts(), b.js()), lambda);
         r
     }
 
@@ -229,54 +278,58 @@ impl Profile {
         // times): the merged durations of short high-jerk segments stay exact even deep into
         // a long profile.
         let ((at, aj), (bt, bj)) = (a, b);
-        let (an, bn) = (at.len(), bt.len());
-        let seg = |t: &[f64], i: usize| if i < t.len() { t[i] } else { 0.0 };
+        let (an, bn) = (at.len().min(aj.len()), bt.len().min(bj.len()));
+        let mu = 1.0 - lambda;
         let (mut i, mut k) = (0, 0);
-        let (mut ra, mut rb) = (seg(at, 0), seg(bt, 0));
-        while i < an || k < bn {
-            let dt = match (i < an, k < bn) {
-                (true, true) => ra.min(rb),
-                (true, false) => ra,
-                _ => rb,
-            };
-            let ja = if i < an { aj[i] } else { 0.0 };
-            let jb = if k < bn { bj[k] } else { 0.0 };
-            self.push(dt, lambda * ja + (1.0 - lambda) * jb);
-            if i < an {
-                if ra <= dt {
-                    i += 1;
-                    ra = seg(at, i);
-                } else {
-                    ra -= dt;
-                }
+        let (mut ra, mut rb) = (
+            if an > 0 { at[0] } else { 0.0 },
+            if bn > 0 { bt[0] } else { 0.0 },
+        );
+        while i < an && k < bn {
+            let dt = ra.min(rb);
+            self.push(dt, lambda * aj[i] + mu * bj[k]);
+            if ra <= dt {
+                i += 1;
+                ra = if i < an { at[i] } else { 0.0 };
+            } else {
+                ra -= dt;
             }
-            if k < bn {
-                if rb <= dt {
-                    k += 1;
-                    rb = seg(bt, k);
-                } else {
-                    rb -= dt;
-                }
+            if rb <= dt {
+                k += 1;
+                rb = if k < bn { bt[k] } else { 0.0 };
+            } else {
+                rb -= dt;
             }
+        }
+        // The longer list's tail (the other's jerk is 0 there).
+        while i < an {
+            self.push(ra, lambda * aj[i] + mu * 0.0);
+            i += 1;
+            ra = if i < an { at[i] } else { 0.0 };
+        }
+        while k < bn {
+            self.push(rb, lambda * 0.0 + mu * bj[k]);
+            k += 1;
+            rb = if k < bn { bt[k] } else { 0.0 };
         }
     }
 
     /// The profile with every state and jerk multiplied by `k` (start state included).
     pub fn scaled(&self, k: f64) -> Profile {
-        let s = self.s[0];
+        let s = self.start;
         let mut r = Profile::new(State::new(s.p * k, s.v * k, s.a * k));
         for i in 0..self.n {
-            r.push(self.t[i], self.j[i] * k);
+            r.push(self.ts()[i], self.js()[i] * k);
         }
         r
     }
 
     /// Same profile with the start position replaced by `p0` (positions shifted).
     pub fn with_start_position(&self, p0: f64) -> Profile {
-        let s = self.s[0];
+        let s = self.start;
         let mut r = Profile::new(State::new(p0, s.v, s.a));
         for i in 0..self.n {
-            r.push(self.t[i], self.j[i]);
+            r.push(self.ts()[i], self.js()[i]);
         }
         r
     }
@@ -305,6 +358,34 @@ pub fn integrate_checked(
 ) -> Option<State> {
     let tv = rel * lim.vmax.abs().max(lim.vmin.abs());
     let ta = rel * lim.amax.abs().max(lim.amin.abs());
+    let (vhi, vlo, ahi, alo) = (lim.vmax + tv, lim.vmin - tv, lim.amax + ta, lim.amin - ta);
+    if !check_velocity || (start.v <= vhi && start.v >= vlo) {
+        // Common case: the start is within the limits; plain checks at every phase end and
+        // velocity extremum (the same checks as the general loop below).
+        if !(start.a <= ahi && start.a >= alo) {
+            return None;
+        }
+        let mut s = start;
+        for (&d, &j) in durations.iter().zip(jerks) {
+            if d <= 0.0 {
+                continue;
+            }
+            if j != 0.0 && check_velocity && s.a * (s.a + j * d) < 0.0 {
+                let tc = -s.a / j;
+                if tc > 0.0 && tc < d {
+                    let v = s.integrate(tc, j).v;
+                    if !(v <= vhi && v >= vlo) {
+                        return None;
+                    }
+                }
+            }
+            s = s.integrate(d, j);
+            if !(s.a <= ahi && s.a >= alo) || (check_velocity && !(s.v <= vhi && s.v >= vlo)) {
+                return None;
+            }
+        }
+        return Some(s);
+    }
     let vin = |v: f64| v <= lim.vmax + tv && v >= lim.vmin - tv;
     let aok = |a: f64| a <= lim.amax + ta && a >= lim.amin - ta;
     let v_start = start.v;
@@ -334,7 +415,8 @@ pub fn integrate_checked(
         if d <= 0.0 {
             continue;
         }
-        if j != 0.0 && check_velocity {
+        // Interior velocity extremum where the acceleration changes sign (at -a/j).
+        if j != 0.0 && check_velocity && s.a * (s.a + j * d) < 0.0 {
             let tc = -s.a / j;
             if tc > 0.0 && tc < d && !vok(s.integrate(tc, j).v) {
                 return None;
@@ -342,6 +424,50 @@ pub fn integrate_checked(
         }
         s = s.integrate(d, j);
         if !(aok(s.a) && vok(s.v)) {
+            return None;
+        }
+    }
+    Some(s)
+}
+
+/// [`integrate_checked`] for a fixed number of phases (the shape solvers' seven), inlined so
+/// that the loop is unrolled with the jerk pattern known; the same checks and results.
+#[inline(always)]
+pub(crate) fn integrate_checked_fixed<const N: usize>(
+    start: State,
+    durations: &[f64; N],
+    jerks: &[f64; N],
+    lim: &Limits,
+    rel: f64,
+    check_velocity: bool,
+) -> Option<State> {
+    let tv = rel * lim.vmax.abs().max(lim.vmin.abs());
+    let ta = rel * lim.amax.abs().max(lim.amin.abs());
+    let (vhi, vlo, ahi, alo) = (lim.vmax + tv, lim.vmin - tv, lim.amax + ta, lim.amin - ta);
+    if check_velocity && !(start.v <= vhi && start.v >= vlo) {
+        // Start outside the velocity limits (after a brake): the general routine.
+        return integrate_checked(start, durations, jerks, lim, rel, check_velocity);
+    }
+    if !(start.a <= ahi && start.a >= alo) {
+        return None;
+    }
+    let mut s = start;
+    for i in 0..N {
+        let (d, j) = (durations[i], jerks[i]);
+        if d <= 0.0 {
+            continue;
+        }
+        if j != 0.0 && check_velocity && s.a * (s.a + j * d) < 0.0 {
+            let tc = -s.a / j;
+            if tc > 0.0 && tc < d {
+                let v = s.integrate(tc, j).v;
+                if !(v <= vhi && v >= vlo) {
+                    return None;
+                }
+            }
+        }
+        s = s.integrate(d, j);
+        if !(s.a <= ahi && s.a >= alo) || (check_velocity && !(s.v <= vhi && s.v >= vlo)) {
             return None;
         }
     }
@@ -365,6 +491,19 @@ mod tests {
         assert!((s.p - 2.0).abs() < 1e-15);
         let (s, _) = p.at(0.5);
         assert!((s.a - 0.5).abs() < 1e-15);
+    }
+
+    #[test]
+    fn segments_past_the_length_read_as_zero() {
+        let mut p = Profile::new(State::new(1.0, 0.0, 0.0));
+        assert_eq!(p.segment(0), (0.0, 0.0));
+        p.push(0.5, 2.0);
+        let mut q = Profile::new(State::default());
+        q.copy_from(&p);
+        assert_eq!(q.segment(0), (0.5, 2.0));
+        assert_eq!(q.segment(1), (0.0, 0.0));
+        assert_eq!(q.segment(MAX_SEGMENTS - 1), (0.0, 0.0));
+        assert!(format!("{q:?}").contains("durations: [0.5]"));
     }
 
     #[test]

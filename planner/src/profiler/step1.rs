@@ -31,7 +31,11 @@ pub struct Step1 {
     problem: Problem,
     /// Absolute start state of the main profile (after the brake).
     start: State,
-    cand: [Shape; MAX_CANDIDATES],
+    /// Candidate shapes, ascending by duration; only the first `n_cand` are initialised
+    /// (read through [`Step1::cands`]).
+    cand: [MaybeUninit<Shape>; MAX_CANDIDATES],
+    /// Their main-profile durations in s.
+    cand_t: [f64; MAX_CANDIDATES],
     n_cand: usize,
 }
 
@@ -72,18 +76,28 @@ impl Step1 {
             brake,
             problem,
             start,
-            cand: [Shape {
-                t: [0.0; 7],
-                dir: 1.0,
-            }; MAX_CANDIDATES],
+            cand: [MaybeUninit::uninit(); MAX_CANDIDATES],
+            cand_t: [0.0; MAX_CANDIDATES],
             n_cand: 0,
         });
-        // Scratch list of all solutions; left uninitialised (4 kB) and written as they come.
+        // Scratch list of all solutions with their durations, kept sorted by duration as they
+        // come (stable insertion: few entries); the shapes are left uninitialised (4 kB) until
+        // written.
         let mut all = [MaybeUninit::<Shape>::uninit(); 64];
+        let mut all_t = [0.0f64; 64];
+        let mut order = [0u8; 64];
         let mut n = 0;
         let mut collect = |sh: Shape| {
             if n < all.len() {
+                let d = sh.duration();
                 all[n].write(sh);
+                all_t[n] = d;
+                let mut k = n;
+                while k > 0 && all_t[order[k - 1] as usize] > d {
+                    order[k] = order[k - 1];
+                    k -= 1;
+                }
+                order[k] = n as u8;
                 n += 1;
             }
         };
@@ -103,25 +117,30 @@ impl Step1 {
         if n == 0 {
             return false;
         }
-        // SAFETY: the first `n` entries were written by `collect`; `MaybeUninit<Shape>` has the
-        // layout of `Shape`.
-        let all: &mut [Shape] =
-            unsafe { std::slice::from_raw_parts_mut(all.as_mut_ptr().cast::<Shape>(), n) };
-        all.sort_by(|a, b| a.duration().total_cmp(&b.duration()));
-        for sh in all.iter() {
-            let d = sh.duration();
+        for &i in &order[..n] {
+            let i = i as usize;
+            let d = all_t[i];
             if s.n_cand > 0 {
-                let last = s.cand[s.n_cand - 1].duration();
+                let last = s.cand_t[s.n_cand - 1];
                 if d - last <= 1e-11 * d.max(1e-3) {
                     continue;
                 }
             }
             if s.n_cand < MAX_CANDIDATES {
-                s.cand[s.n_cand] = *sh;
+                // SAFETY: entries below `n` were written by `collect`.
+                s.cand[s.n_cand].write(unsafe { all[i].assume_init() });
+                s.cand_t[s.n_cand] = d;
                 s.n_cand += 1;
             }
         }
         true
+    }
+
+    /// The candidate shapes (ascending by duration).
+    fn cands(&self) -> &[Shape] {
+        // SAFETY: the first `n_cand` entries are initialised by `solve_into`;
+        // `MaybeUninit<Shape>` has the layout of `Shape`.
+        unsafe { std::slice::from_raw_parts(self.cand.as_ptr().cast::<Shape>(), self.n_cand) }
     }
 
     fn zero_solution(&self) -> bool {
@@ -172,16 +191,14 @@ impl Step1 {
 
     /// Minimal total duration (brake included) in s.
     pub fn t_min(&self) -> f64 {
-        self.brake_duration() + self.cand[0].duration()
+        self.brake_duration() + self.cand_t[0]
     }
 
     /// Total durations (brake included, s) of all extremal profiles reaching the target,
     /// ascending: the boundaries of the feasible set.
     pub fn boundaries(&self) -> impl Iterator<Item = f64> + '_ {
         let tb = self.brake_duration();
-        self.cand[..self.n_cand]
-            .iter()
-            .map(move |c| c.duration() + tb)
+        self.cand_t[..self.n_cand].iter().map(move |c| c + tb)
     }
 
     /// Feasible intervals of the total duration (brake included) in s, ascending; the last one
@@ -192,9 +209,9 @@ impl Step1 {
         let tb = self.brake_duration();
         let mut out = [(0.0, 0.0); MAX_INTERVALS];
         let mut n = 0;
-        let mut lo = self.cand[0].duration();
+        let mut lo = self.cand_t[0];
         for i in 0..self.n_cand - 1 {
-            let (a, b) = (self.cand[i].duration(), self.cand[i + 1].duration());
+            let (a, b) = (self.cand_t[i], self.cand_t[i + 1]);
             if !self.feasible_main(0.5 * (a + b)) && n < MAX_INTERVALS - 1 {
                 out[n] = (lo + tb, a + tb);
                 n += 1;
@@ -210,12 +227,12 @@ impl Step1 {
     pub fn is_feasible(&self, t: f64) -> bool {
         let td = t - self.brake_duration();
         let tol = 1e-12 * td.abs().max(1.0);
-        if td < self.cand[0].duration() - tol {
+        if td < self.cand_t[0] - tol {
             return false;
         }
-        self.cand[..self.n_cand]
+        self.cand_t[..self.n_cand]
             .iter()
-            .any(|c| (c.duration() - td).abs() <= tol)
+            .any(|c| (c - td).abs() <= tol)
             || self.feasible_main(td)
     }
 
@@ -231,7 +248,7 @@ impl Step1 {
     pub fn profile_at_checked_into(&self, t: f64, out: &mut Profile) -> bool {
         let td = t - self.brake_duration();
         let tol = 1e-12 * td.abs().max(1.0);
-        if td < self.cand[0].duration() - tol {
+        if td < self.cand_t[0] - tol {
             return false;
         }
         self.profile_at_into(t, out)
@@ -239,7 +256,7 @@ impl Step1 {
 
     /// The time-optimal profile (brake included).
     pub fn optimal_profile(&self) -> Profile {
-        self.with_brake(&self.cand[0].profile(self.start, self.problem.lim.jmax))
+        self.with_brake(&self.cands()[0].profile(self.start, self.problem.lim.jmax))
     }
 
     fn with_brake(&self, main: &Profile) -> Profile {
@@ -263,8 +280,8 @@ impl Step1 {
         let td = t - self.brake_duration();
         let tol = 1e-12 * td.abs().max(1.0);
         let jmax = self.problem.lim.jmax;
-        for c in &self.cand[..self.n_cand] {
-            if (c.duration() - td).abs() <= tol {
+        for (c, ct) in self.cands().iter().zip(&self.cand_t) {
+            if (ct - td).abs() <= tol {
                 // The brake ends at `start`: the phases continue from its end state.
                 out.copy_from(&self.brake);
                 c.push_onto(out, jmax);
