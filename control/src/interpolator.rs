@@ -37,6 +37,8 @@ pub struct PreparedRun<S> {
     duration_s: f64,
     run_id: u32,
     start: Pose,
+    /// RECOVER: program time to continue at (paused), and the pose there.
+    resume: Option<(f64, Pose)>,
 }
 
 impl<S> PreparedRun<S> {
@@ -67,20 +69,97 @@ pub fn prepare_run<S: SetpointSource>(
     if cmd.version != PROTOCOL_VERSION {
         return Err(CommandError::Version(cmd.version));
     }
-    if cmd.kind != command_kind::RUN {
-        return Err(CommandError::Malformed(format!(
-            "command kind {} is not RUN",
-            cmd.kind
-        )));
-    }
+    let recover = match cmd.kind {
+        command_kind::RUN => false,
+        command_kind::RECOVER => true,
+        k => {
+            return Err(CommandError::Malformed(format!(
+                "command kind {k} is neither RUN nor RECOVER"
+            )))
+        }
+    };
     let moves = moves_of(cmd)?;
+    let start = if recover {
+        let o = cmd.origin;
+        Pose::new(o[0], o[1], o[2])
+    } else {
+        start
+    };
     let duration_s = source.load(&moves, start)?;
+    let resume = if recover {
+        Some(find_resume_time(&source, duration_s, cmd)?)
+    } else {
+        None
+    };
     Ok(PreparedRun {
         source,
         duration_s,
         run_id: cmd.run_id,
         start,
+        resume,
     })
+}
+
+/// How far the executed pose may be from the re-planned program for a recovery, mm (rad x 100).
+pub const RECOVER_TOLERANCE_MM: f64 = 0.5;
+
+/// The program time near `cmd.resume_s` whose planned pose is `cmd.executed` (a recovery).
+fn find_resume_time<S: SetpointSource>(
+    source: &S,
+    duration_s: f64,
+    cmd: &Command,
+) -> Result<(f64, Pose), CommandError> {
+    let e = Pose::new(cmd.executed[0], cmd.executed[1], cmd.executed[2]);
+    let dist = |tau: f64| {
+        let p = source.sample(tau);
+        (p.x - e.x).hypot(p.y - e.y) + 100.0 * (p.phi - e.phi).abs()
+    };
+    if !cmd.resume_s.is_finite() || cmd.executed.iter().any(|v| !v.is_finite()) {
+        return Err(CommandError::Malformed(
+            "recovery hint is not finite".into(),
+        ));
+    }
+    // The status reports the program time every heartbeat, ahead of or behind the executed
+    // setpoint by a few cycles: search +-2 s around the hint at 1 ms, then refine.
+    let (lo, hi) = (
+        (cmd.resume_s - 2.0).max(0.0),
+        (cmd.resume_s + 2.0).min(duration_s),
+    );
+    let mut best = (f64::INFINITY, lo);
+    let n = ((hi - lo) / 1e-3).ceil().max(1.0) as usize;
+    for k in 0..=n {
+        let tau = (lo + (hi - lo) * k as f64 / n as f64).min(hi);
+        let d = dist(tau);
+        // on ties (holds) prefer the time nearest the hint
+        if d < best.0 - 1e-12
+            || (d <= best.0 + 1e-12 && (tau - cmd.resume_s).abs() < (best.1 - cmd.resume_s).abs())
+        {
+            best = (d, tau);
+        }
+    }
+    // golden-section refinement within one grid step
+    let (mut a, mut b) = ((best.1 - 1e-3).max(lo), (best.1 + 1e-3).min(hi));
+    for _ in 0..40 {
+        let (m1, m2) = (a + 0.382 * (b - a), a + 0.618 * (b - a));
+        if dist(m1) < dist(m2) {
+            b = m2;
+        } else {
+            a = m1;
+        }
+    }
+    let tau = if dist(0.5 * (a + b)) < best.0 {
+        0.5 * (a + b)
+    } else {
+        best.1
+    };
+    let d = dist(tau);
+    if d > RECOVER_TOLERANCE_MM {
+        return Err(CommandError::Malformed(format!(
+            "the executed pose is {d:.3} mm from the re-planned program near {:.2} s:              cannot recover",
+            cmd.resume_s
+        )));
+    }
+    Ok((tau, source.sample(tau)))
 }
 
 /// Converts a wire command's program into moves (allocates; between cycles only).
@@ -193,6 +272,8 @@ pub struct InterpolatorStep<S> {
     rate: f64,
     /// A jerk-limited change of the rate in progress (pause/stop brake, resume ramp).
     ramp: Option<Ramp>,
+    /// The pose the current program was planned from.
+    origin: Pose,
 }
 
 /// A change of the program-time rate: program time follows the 1-DoF profile's position.
@@ -225,6 +306,7 @@ impl<S: SetpointSource> InterpolatorStep<S> {
             history: [(0, 0.0); HISTORY],
             rate: 0.0,
             ramp: None,
+            origin: home,
         }
     }
 
@@ -331,6 +413,11 @@ impl<S: SetpointSource> InterpolatorStep<S> {
                     }
                 }
             }
+            command_kind::RECOVER => {
+                self.can_start()?;
+                let run = prepare_run(self.source.clone(), cmd, self.hold)?;
+                self.install(run).0
+            }
             command_kind::PAUSE => {
                 if self.state == planner_state::RUNNING {
                     self.state = planner_state::PAUSED;
@@ -359,6 +446,7 @@ impl<S: SetpointSource> InterpolatorStep<S> {
     }
 
     fn start_program(&mut self, duration_s: f64, run_id: u32) {
+        self.origin = self.hold;
         self.duration_s = duration_s;
         self.tau_s = 0.0;
         self.rate = 1.0;
@@ -400,6 +488,17 @@ impl<S: SetpointSource> InterpolatorStep<S> {
         if let Err(e) = self.can_start() {
             return (Err(e), run.source);
         }
+        if let Some((tau, pose)) = run.resume {
+            // A recovery: continue the program, paused, where the drive stopped.
+            let old = std::mem::replace(&mut self.source, run.source);
+            self.start_program(run.duration_s, run.run_id);
+            self.origin = run.start;
+            self.tau_s = tau;
+            self.hold = pose;
+            self.rate = 0.0;
+            self.state = planner_state::PAUSED;
+            return (Ok(()), old);
+        }
         let moved = (run.start.x - self.hold.x)
             .abs()
             .max((run.start.y - self.hold.y).abs())
@@ -432,6 +531,7 @@ impl<S: SetpointSource> InterpolatorStep<S> {
             t_s,
             progress_s: self.tau_s,
             duration_s: self.duration_s,
+            origin: self.origin.to_array(),
             run_id: self.run_id,
             state: self.state,
             version: PROTOCOL_VERSION,
@@ -647,6 +747,54 @@ mod tests {
         // only RUN commands are planned
         let pause = simple_command(command_kind::PAUSE, 0, 1);
         assert!(prepare_run(InterimPathSource::new(), &pause, Pose::default()).is_err());
+    }
+
+    #[test]
+    fn a_restarted_interpolator_recovers_the_run_where_the_drive_stopped() {
+        use crate::planned::{MotionLimits, PlannerSource};
+        use pcr_kinematics::Robot;
+        let src = || PlannerSource::new(Robot::nominal(), MotionLimits::default());
+        let run = simple_command(command_kind::RUN, program_id::CIRCLE, 3);
+        let mut a = InterpolatorStep::new(src(), Pose::default());
+        a.command(&run).unwrap();
+        let mut t = 0.0;
+        let mut last = a.step(t);
+        for _ in 0..150 {
+            t += 0.02;
+            last = a.step(t);
+        }
+        let status = a.status(t);
+        assert_eq!(status.origin, [0.0; 3]);
+        // the interpolator dies; a new one holds elsewhere and gets RECOVER with a stale hint
+        let mut b = InterpolatorStep::new(src(), Pose::new(1.0, 2.0, 0.0));
+        let mut rec = run;
+        rec.kind = command_kind::RECOVER;
+        rec.origin = status.origin;
+        rec.executed = last.nominal;
+        rec.resume_s = status.progress_s + 0.3;
+        b.command(&rec).unwrap();
+        let st = b.status(t);
+        assert_eq!((st.state, st.run_id), (planner_state::PAUSED, 3));
+        assert!(
+            (st.progress_s - status.progress_s).abs() < 1e-6,
+            "{st:?} vs {status:?}"
+        );
+        let held = b.step(t);
+        assert!((held.x_mm - last.x_mm).abs() < 1e-6 && (held.y_mm - last.y_mm).abs() < 1e-6);
+        // resumed, it finishes the same program at the same place
+        b.command(&simple_command(command_kind::RESUME, 0, 3))
+            .unwrap();
+        let (mut end_a, mut end_b) = (last, held);
+        for k in 1..2000 {
+            end_a = a.step(t + 0.02 * k as f64);
+            end_b = b.step(t + 0.02 * k as f64);
+        }
+        assert_eq!(b.status(t).state, planner_state::DONE);
+        assert!((end_a.x_mm - end_b.x_mm).abs() < 1e-9 && (end_a.y_mm - end_b.y_mm).abs() < 1e-9);
+        // a pose that is not on the program is refused
+        rec.executed = [30.0, -30.0, 0.0];
+        let mut c = InterpolatorStep::new(src(), Pose::default());
+        assert!(c.command(&rec).is_err());
     }
 
     #[test]

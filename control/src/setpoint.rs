@@ -80,7 +80,7 @@ pub fn active_piece<T>(pieces: &[(f64, f64, T)], tau_s: f64) -> usize {
 ///
 /// Implementations: [`InterimPathSource`] (here, interim) and the planner's jerk-limited
 /// interpolator (to come). `sample` is called once per control cycle and must not allocate.
-pub trait SetpointSource {
+pub trait SetpointSource: Clone {
     /// A short name for logs.
     fn name(&self) -> &str;
     /// Plans `moves` starting at rest at `start`; returns the program's duration, s. May

@@ -346,8 +346,13 @@ pub mod command_kind {
     pub const PAUSE: u32 = 2;
     /// Resume after a pause.
     pub const RESUME: u32 = 3;
-    /// Stop (hold where the setpoint is, drop the program).
+    /// Stop (brake along the path, then drop the program).
     pub const STOP: u32 = 4;
+    /// Re-plan run `run_id`'s program (same program fields as RUN) from
+    /// [`crate::Command::origin`] and continue it, paused, at the program time near
+    /// [`crate::Command::resume_s`] whose planned pose is [`crate::Command::executed`] (after a
+    /// planner restart; a RESUME then continues the motion).
+    pub const RECOVER: u32 = 5;
 }
 
 /// Built-in programs of [`Command::program`].
@@ -403,6 +408,12 @@ pub struct Command {
     pub run_id: u32,
     /// Number of valid entries in `moves`.
     pub n_moves: u32,
+    /// RECOVER: the pose the program was first planned from (x mm, y mm, phi rad).
+    pub origin: [f64; 3],
+    /// RECOVER: the planned pose of the last setpoint the drive executed.
+    pub executed: [f64; 3],
+    /// RECOVER: the program time last reported for the run, s (a hint).
+    pub resume_s: f64,
     /// The moves for [`program_id::MOVES`].
     pub moves: [MoveMsg; MAX_MOVES],
     /// [`PROTOCOL_VERSION`].
@@ -440,6 +451,8 @@ pub struct PlannerStatus {
     pub progress_s: f64,
     /// Program duration, s.
     pub duration_s: f64,
+    /// The pose the running program was planned from (x mm, y mm, phi rad).
+    pub origin: [f64; 3],
     /// Run id.
     pub run_id: u32,
     /// [`planner_state`].

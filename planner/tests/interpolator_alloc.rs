@@ -2,6 +2,7 @@
 //! allocation during `step()` (including a stop request).
 
 use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use pcr_planner::composite::{CompositeLimits, CompositeMotion, CompositePath};
@@ -13,9 +14,16 @@ struct Counting;
 
 static ALLOCS: AtomicUsize = AtomicUsize::new(0);
 
+thread_local! {
+    // Only the test's own thread is counted (the harness may allocate on its thread meanwhile).
+    static COUNT_HERE: Cell<bool> = const { Cell::new(false) };
+}
+
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCS.fetch_add(1, Ordering::SeqCst);
+        if COUNT_HERE.try_with(|c| c.get()).unwrap_or(false) {
+            ALLOCS.fetch_add(1, Ordering::SeqCst);
+        }
         unsafe { System.alloc(layout) }
     }
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
@@ -64,6 +72,7 @@ fn step_and_stop_do_not_allocate() {
     .unwrap();
     ip.push_composite(m).unwrap();
     let before = ALLOCS.load(Ordering::SeqCst);
+    COUNT_HERE.with(|c| c.set(true));
     let mut steps = 0;
     let mut on_composite = None;
     let mut stopped = false;
@@ -82,6 +91,7 @@ fn step_and_stop_do_not_allocate() {
             break;
         }
     }
+    COUNT_HERE.with(|c| c.set(false));
     let after = ALLOCS.load(Ordering::SeqCst);
     assert!(steps > 200 && stopped);
     assert_eq!(after, before, "step() allocated");

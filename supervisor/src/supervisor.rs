@@ -83,6 +83,15 @@ struct Run {
     progress_s: f64,
     /// The newest driver state of this run reports the motors at rest.
     settled: bool,
+    /// The command that started the run (re-sent as RECOVER after a planner restart).
+    cmd: Command,
+    /// The pose the planner planned the program from (from its status).
+    origin: Option<[f64; 3]>,
+    /// The planned pose of the newest setpoint the drive executed in this run.
+    executed: Option<[f64; 3]>,
+    /// A recovery after a planner restart: `Some(false)` waits for the planner, `Some(true)`
+    /// has sent RECOVER and waits for the run to be back (paused).
+    recover: Option<bool>,
 }
 
 /// The supervisor.
@@ -307,13 +316,23 @@ impl Supervisor {
         p.backoff = (p.backoff * 2).min(backoff_max);
         if let Some(run) = &mut self.run {
             if run.ended.is_none() {
-                if is_planner {
+                if is_planner && (run.origin.is_none() || run.executed.is_none()) {
                     eprintln!(
-                        "pcr-supervisor: run {} aborted: the planner restarts idle; the robot \
-                         holds where it is (safe stop of the motion)",
+                        "pcr-supervisor: run {} aborted: the planner failed before the run \
+                         moved; the robot holds where it is",
                         run.id
                     );
                     run.ended = Some((now, "aborted (planner failed)"));
+                } else if is_planner {
+                    // The drive holds on the setpoint it executed last; the restarted planner
+                    // re-plans the program and continues from there.
+                    run.paused_by_supervisor = true;
+                    run.recover = Some(false);
+                    eprintln!(
+                        "pcr-supervisor: run {} paused: the planner restarts; the robot holds and \
+                         the run continues from where it stopped",
+                        run.id
+                    );
                 } else if !run.paused_by_supervisor {
                     run.paused_by_supervisor = true;
                     eprintln!(
@@ -415,6 +434,10 @@ impl Supervisor {
             duration_s: 0.0,
             progress_s: 0.0,
             settled: false,
+            cmd,
+            origin: None,
+            executed: None,
+            recover: None,
         });
         Ok(format!(
             "run {id} ({name}) started; recording {}",
@@ -648,7 +671,25 @@ impl Supervisor {
         // Resume a run paused by the supervisor once everybody is back.
         let healthy = self.all_healthy();
         if let Some(run) = &mut self.run {
-            if run.ended.is_none() && run.paused_by_supervisor && healthy {
+            if run.ended.is_none() && run.recover == Some(false) && healthy {
+                // The planner is back: it re-plans the program and continues it, paused, at
+                // the setpoint the drive executed last.
+                let (Some(origin), Some(executed)) = (run.origin, run.executed) else {
+                    unreachable!("checked when the planner failed")
+                };
+                let mut c = run.cmd;
+                c.kind = command_kind::RECOVER;
+                c.origin = origin;
+                c.executed = executed;
+                c.resume_s = run.progress_s;
+                run.recover = Some(true);
+                eprintln!(
+                    "pcr-supervisor: run {} recovering near {:.2} s of the program",
+                    run.id, run.progress_s
+                );
+                let _ = self.pub_cmd.send_copy(c);
+            }
+            if run.ended.is_none() && run.paused_by_supervisor && run.recover.is_none() && healthy {
                 run.paused_by_supervisor = false;
                 if !run.user_paused {
                     eprintln!("pcr-supervisor: run {} resumed", run.id);
@@ -664,6 +705,7 @@ impl Supervisor {
             if let Some(run) = &mut self.run {
                 let st = smp.payload();
                 if st.run_id == run.id && !run_over(run, now) {
+                    run.executed = Some(st.planned);
                     let _ = run.recorder.row(st);
                     run.acc.add(st);
                     run.settled = st.flags & pcr_messages::driver_flags::MOVING == 0;
@@ -691,6 +733,27 @@ impl Supervisor {
                 if st.run_id == run.id {
                     run.progress_s = st.progress_s;
                     run.duration_s = st.duration_s;
+                    if matches!(st.state, planner_state::RUNNING | planner_state::PAUSED) {
+                        run.origin = Some(st.origin);
+                    }
+                    if run.recover == Some(true) && run.ended.is_none() {
+                        match st.state {
+                            planner_state::PAUSED => {
+                                run.recover = None;
+                                eprintln!("pcr-supervisor: run {} recovered", run.id);
+                            }
+                            planner_state::REFUSED => {
+                                eprintln!(
+                                    "pcr-supervisor: run {} aborted: the restarted planner \
+                                     could not continue it; the robot holds where it is",
+                                    run.id
+                                );
+                                run.ended = Some((now, "aborted (recovery refused)"));
+                            }
+                            _ => {}
+                        }
+                        continue;
+                    }
                     if run.ended.is_none() {
                         match st.state {
                             planner_state::DONE => run.ended = Some((now, "done")),

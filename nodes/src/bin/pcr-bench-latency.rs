@@ -47,6 +47,9 @@ struct Args {
     /// SCHED_FIFO priority for every process of both transports (0 = normal scheduling).
     #[arg(long, default_value_t = 0)]
     rt_priority: i32,
+    /// Pin every chain process of both transports to this CPU (as configs/sim.toml does).
+    #[arg(long)]
+    cpu: Option<usize>,
     /// Lock every chain process's memory (mlockall), as a real-time deployment would.
     #[arg(long)]
     mlockall: bool,
@@ -176,10 +179,11 @@ fn bench(a: &Args) -> Result<()> {
     let period_ns = (a.period_ms * 1e6) as u64;
     println!(
         "# pcr-bench-latency: {} cycles per transport at a {} ms period, SCHED_FIFO priority {} \
-         (0 = normal scheduling), {} CPUs",
+         (0 = normal scheduling), chain pinned to CPU {}, {} CPUs",
         a.cycles,
         a.period_ms,
         a.rt_priority,
+        a.cpu.map_or("-".to_string(), |c| c.to_string()),
         std::thread::available_parallelism().map_or(0, |n| n.get())
     );
     let ice = bench_iceoryx2(a, period_ns)?;
@@ -218,7 +222,12 @@ fn bench_iceoryx2_in(a: &Args, period_ns: u64, prefix: &str) -> Result<(Hists, u
         a.rt_priority.to_string(),
     ];
     let lock = a.mlockall.then(|| "--mlockall".to_string());
-    let common: Vec<String> = common.into_iter().chain(lock).collect();
+    let cpu = a
+        .cpu
+        .map(|c| ["--cpu".to_string(), c.to_string()])
+        .into_iter()
+        .flatten();
+    let common: Vec<String> = common.into_iter().chain(lock).chain(cpu).collect();
     let mut kids = Kids(Vec::new());
     for b in ["pcr-driver", "pcr-ik", "pcr-planner"] {
         kids.0.push(
@@ -326,7 +335,7 @@ fn from_bytes<T: Copy + Default>(b: &[u8]) -> T {
 
 fn uds_role(role: &str, dir: &Path, a: &Args) -> Result<()> {
     let robot = robot(&a.robot)?;
-    pcr_nodes::realtime::apply(a.rt_priority, None, false);
+    pcr_nodes::realtime::apply(a.rt_priority, a.cpu, false);
     let mut buf = [0u8; 4096];
     match role {
         "ik" => {
@@ -389,6 +398,7 @@ fn bench_uds(a: &Args, period_ns: u64) -> Result<(Hists, u64)> {
                 .args(["--uds-role", role, "--robot", &a.robot])
                 .arg("--rt-priority")
                 .arg(a.rt_priority.to_string())
+                .args(a.cpu.map(|c| format!("--cpu={c}")))
                 .arg("--period-ms")
                 .arg(a.period_ms.to_string())
                 .arg("--dir")
@@ -405,7 +415,7 @@ fn bench_uds(a: &Args, period_ns: u64) -> Result<(Hists, u64)> {
         std::thread::sleep(Duration::from_millis(10));
     }
     let tx = UnixDatagram::unbound()?;
-    let rt = pcr_nodes::realtime::apply(a.rt_priority, None, false);
+    let rt = pcr_nodes::realtime::apply(a.rt_priority, a.cpu, false);
     let mut interp = InterpolatorStep::new(InterimPathSource::new(), Pose::default());
     let mut h = Hists::new();
     let mut late_wakes = 0u64;

@@ -186,7 +186,7 @@ fn run(a: Args) -> Result<()> {
             }
             while let Ok(Some(cmd)) = sub_cmd.receive() {
                 let cmd = cmd.payload();
-                if cmd.kind == command_kind::RUN {
+                if matches!(cmd.kind, command_kind::RUN | command_kind::RECOVER) {
                     // Plan on the worker thread, never in the cycle.
                     let busy = interp.can_start().err().or_else(|| {
                         planning
