@@ -71,3 +71,27 @@ pub fn apply_normal() {
     // SAFETY: plain syscall on this process.
     unsafe { libc::sched_setscheduler(0, libc::SCHED_OTHER, &p) };
 }
+
+/// Keeps the CPUs out of deep idle states while held: writes `us` (microseconds of tolerated
+/// wake-up latency, usually 0) to `/dev/cpu_dma_latency` (the kernel's PM QoS interface) and
+/// keeps the file open; the request ends when the returned file is dropped. Deep idle states
+/// (and, in a virtual machine, a halted virtual CPU) are where most of a sleeping real-time
+/// process's wake-up latency comes from. Warns and returns `None` where not permitted.
+pub fn hold_cpu_dma_latency(us: i32) -> Option<std::fs::File> {
+    use std::io::Write;
+    let path = "/dev/cpu_dma_latency";
+    let r = std::fs::OpenOptions::new()
+        .write(true)
+        .open(path)
+        .and_then(|mut f| f.write_all(&us.to_ne_bytes()).map(|()| f));
+    match r {
+        Ok(f) => {
+            tracing::info!(us, "CPU wake-up latency held at {us} us ({path})");
+            Some(f)
+        }
+        Err(e) => {
+            tracing::warn!(err = %e, "{path} not writable: CPUs may sleep deeply");
+            None
+        }
+    }
+}

@@ -165,6 +165,10 @@ pub struct RealtimeConfig {
     /// Lock the processes' memory (mlockall).
     #[serde(default)]
     pub mlockall: bool,
+    /// Hold the CPUs' tolerated wake-up latency at this many microseconds while the supervisor
+    /// runs (`/dev/cpu_dma_latency`, usually 0: no deep idle states). Unset: leave it.
+    #[serde(default)]
+    pub cpu_dma_latency_us: Option<i32>,
 }
 
 /// One process to run.
@@ -282,6 +286,14 @@ impl SupervisorConfig {
         ] {
             if !(v.is_finite() && v > 0.0) {
                 return Err(bad(k.into(), format!("must be a positive number, got {v}")));
+            }
+        }
+        if let Some(us) = self.realtime.cpu_dma_latency_us {
+            if us < 0 {
+                return Err(bad(
+                    "realtime.cpu_dma_latency_us".into(),
+                    format!("must be >= 0 microseconds, got {us}"),
+                ));
             }
         }
         if self.heartbeat_timeout_ms <= 2.0 * self.heartbeat_ms {
@@ -411,6 +423,8 @@ backend = "sim"
         assert!(e.contains("restart.max_failures"), "{e}");
         let e = err(&format!("period_ms = -1.0\n{OK}"));
         assert!(e.contains("period_ms"), "{e}");
+        let e = err(&format!("{OK}\n[realtime]\ncpu_dma_latency_us = -5\n"));
+        assert!(e.contains("realtime.cpu_dma_latency_us"), "{e}");
         let e = err(&format!("colour = 1\n{OK}"));
         assert!(e.contains("colour"), "{e}");
         let e = err(&OK.replace("backend = \"sim\"", "backend = \"serial\""));
@@ -424,7 +438,7 @@ backend = "sim"
     #[test]
     fn shipped_configs_load() {
         let root = concat!(env!("CARGO_MANIFEST_DIR"), "/../configs/");
-        for f in ["sim.toml", "lab.toml"] {
+        for f in ["sim.toml", "sim-corrected.toml", "sim-fil.toml", "lab.toml"] {
             SupervisorConfig::load(format!("{root}{f}")).unwrap();
         }
     }

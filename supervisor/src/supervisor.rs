@@ -116,6 +116,8 @@ pub struct Supervisor {
     last_hello: Instant,
     start: Instant,
     last_summary: Option<String>,
+    /// The PM QoS request (`[realtime] cpu_dma_latency_us`), held while the supervisor lives.
+    _cpu_latency: Option<std::fs::File>,
 }
 
 fn ms(v: f64) -> Duration {
@@ -183,6 +185,10 @@ impl Supervisor {
                 gave_up: false,
             })
             .collect();
+        let cpu_latency = cfg
+            .realtime
+            .cpu_dma_latency_us
+            .and_then(pcr_nodes::realtime::hold_cpu_dma_latency);
         Ok(Self {
             cfg,
             opts,
@@ -204,6 +210,7 @@ impl Supervisor {
             last_hello: now,
             start: now,
             last_summary: None,
+            _cpu_latency: cpu_latency,
         })
     }
 

@@ -50,6 +50,10 @@ struct Args {
     /// Pin every chain process of both transports to this CPU (as configs/sim.toml does).
     #[arg(long)]
     cpu: Option<usize>,
+    /// Hold the CPUs' tolerated wake-up latency at this many microseconds during the bench
+    /// (`/dev/cpu_dma_latency`; 0 = no deep idle states), as `[realtime] cpu_dma_latency_us`.
+    #[arg(long)]
+    cpu_dma_latency: Option<i32>,
     /// Lock every chain process's memory (mlockall), as a real-time deployment would.
     #[arg(long)]
     mlockall: bool,
@@ -177,13 +181,18 @@ fn robot(path: &str) -> Result<Robot> {
 
 fn bench(a: &Args) -> Result<()> {
     let period_ns = (a.period_ms * 1e6) as u64;
+    let _pm_qos = a
+        .cpu_dma_latency
+        .and_then(pcr_nodes::realtime::hold_cpu_dma_latency);
     println!(
         "# pcr-bench-latency: {} cycles per transport at a {} ms period, SCHED_FIFO priority {} \
-         (0 = normal scheduling), chain pinned to CPU {}, {} CPUs",
+         (0 = normal scheduling), chain pinned to CPU {}, CPU wake-up latency held at {} us, \
+         {} CPUs",
         a.cycles,
         a.period_ms,
         a.rt_priority,
         a.cpu.map_or("-".to_string(), |c| c.to_string()),
+        a.cpu_dma_latency.map_or("-".to_string(), |c| c.to_string()),
         std::thread::available_parallelism().map_or(0, |n| n.get())
     );
     let ice = bench_iceoryx2(a, period_ns)?;
