@@ -518,6 +518,17 @@ impl<S: SetpointSource> InterpolatorStep<S> {
         }
     }
 
+    /// Sets the pose held while idle from a pose the robot was commanded to (e.g. FK of the
+    /// drive's positions after a restart): the correction offset in it is taken out, so that
+    /// holding there does not walk away while a correction is active.
+    pub fn set_hold_commanded(&mut self, pose: Pose) {
+        self.set_hold(Pose::new(
+            pose.x - self.offset[0],
+            pose.y - self.offset[1],
+            pose.phi - self.offset[2],
+        ));
+    }
+
     /// Sets the pose held while idle (e.g. the measured pose after a restart).
     pub fn set_hold(&mut self, pose: Pose) {
         if self.state != planner_state::RUNNING && self.state != planner_state::PAUSED {
@@ -795,6 +806,30 @@ mod tests {
         rec.executed = [30.0, -30.0, 0.0];
         let mut c = InterpolatorStep::new(src(), Pose::default());
         assert!(c.command(&rec).is_err());
+    }
+
+    #[test]
+    fn holding_the_commanded_pose_under_a_correction_does_not_walk_away() {
+        let mut s = InterpolatorStep::new(InterimPathSource::new(), Pose::default());
+        let corr = Correction {
+            offset: [0.4, -0.3, 0.002],
+            version: PROTOCOL_VERSION,
+            ..Default::default()
+        };
+        s.set_correction(&corr);
+        let mut t = 0.0;
+        for _ in 0..100 {
+            // the drive reaches what it is commanded; the planner re-holds there each cycle
+            let sp = s.step(t);
+            s.set_hold_commanded(Pose::new(sp.x_mm, sp.y_mm, sp.phi_rad));
+            t += 0.02;
+        }
+        let sp = s.step(t);
+        assert!(
+            sp.nominal[0].abs() < 1e-12 && sp.nominal[1].abs() < 1e-12,
+            "{sp:?}"
+        );
+        assert!((sp.x_mm - 0.4).abs() < 1e-12);
     }
 
     #[test]

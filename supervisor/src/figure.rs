@@ -69,6 +69,7 @@ pub fn run_figure(recording: &Path) -> Result<std::path::PathBuf, String> {
     .label("measured")
     .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], MEASURED.stroke_width(2)));
     c.configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
         .label_font((FONT_FAMILY, 13))
         .background_style(WHITE.mix(0.9))
         .border_style(BLACK)

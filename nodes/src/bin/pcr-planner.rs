@@ -237,7 +237,7 @@ fn run(a: Args) -> Result<()> {
                         std::array::from_fn(|i| robot.steps_to_kappa(i, st.steps[i] as f64));
                     if let Ok(p) = robot.fk_warm(&kappa, &hold_guess) {
                         hold_guess = p;
-                        interp.set_hold(p);
+                        interp.set_hold_commanded(p);
                     }
                 }
             }
