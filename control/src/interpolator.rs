@@ -480,6 +480,14 @@ impl<S: SetpointSource> InterpolatorStep<S> {
         }
     }
 
+    /// Marks run `run_id` as stopped before it started (stopped while being planned).
+    pub fn mark_stopped(&mut self, run_id: u32) {
+        if self.can_start().is_ok() {
+            self.run_id = run_id;
+            self.state = planner_state::STOPPED;
+        }
+    }
+
     /// Starts a program planned off the cycle by [`prepare_run`]. Refused while another program
     /// runs or when the held pose moved since the program was planned from it. Neither
     /// allocates nor frees: it returns the source no longer needed (the previous one, or the
@@ -755,6 +763,14 @@ mod tests {
         idle.refuse(9);
         assert_eq!(idle.status(0.0).state, planner_state::REFUSED);
         assert_eq!(idle.status(0.0).run_id, 9);
+        idle.mark_stopped(10);
+        assert_eq!(
+            (idle.status(0.0).state, idle.status(0.0).run_id),
+            (planner_state::STOPPED, 10)
+        );
+        // a running program is not marked
+        s.mark_stopped(11);
+        assert_eq!(s.status(0.0).run_id, 1);
         // only RUN commands are planned
         let pause = simple_command(command_kind::PAUSE, 0, 1);
         assert!(prepare_run(InterimPathSource::new(), &pause, Pose::default()).is_err());

@@ -484,6 +484,11 @@ impl Supervisor {
                 };
                 if let Some(r) = &mut self.run {
                     r.user_paused = k == command_kind::PAUSE;
+                    if k == command_kind::STOP && r.recover.is_some() && r.ended.is_none() {
+                        // Stopped while the planner restarts: nothing to continue.
+                        r.recover = None;
+                        r.ended = Some((Instant::now(), "stopped"));
+                    }
                 }
                 match self.pub_cmd.send_copy(simple_command(k, 0, run_id)) {
                     Ok(_) => word.into(),
@@ -756,6 +761,10 @@ impl Supervisor {
                                     run.id
                                 );
                                 run.ended = Some((now, "aborted (recovery refused)"));
+                            }
+                            planner_state::STOPPED => {
+                                run.recover = None;
+                                run.ended = Some((now, "stopped"));
                             }
                             _ => {}
                         }

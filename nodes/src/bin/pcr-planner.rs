@@ -208,6 +208,9 @@ fn run(a: Args) -> Result<()> {
                 }
                 if cmd.kind == command_kind::STOP && planning.is_some() {
                     cancelled = planning.take();
+                    if let Some(id) = cancelled {
+                        interp.mark_stopped(id);
+                    }
                     tracing::info!(run_id = cancelled, "stopped while planning");
                 }
                 match interp.command(cmd) {
