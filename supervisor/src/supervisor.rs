@@ -1006,3 +1006,50 @@ pub fn run(cfg: SupervisorConfig, opts: Options) -> Result<i32> {
 }
 
 use iceoryx2::waitset::WaitSetRunResult;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn workspace_file(rel: &str) -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(rel)
+    }
+
+    #[test]
+    fn a_program_file_becomes_a_run_command_named_after_it() {
+        let f = workspace_file("configs/programs/slot.toml");
+        assert_eq!(program_name(&f), "slot");
+        let c = program_command(&f).unwrap();
+        assert_eq!(c.kind, command_kind::RUN);
+        assert_eq!(c.program, program_id::MOVES);
+        assert_eq!(c.n_moves, 10);
+        assert_eq!(c.limits.speed_mm_s, 40.0);
+        assert_eq!(c.limits.joint_jerk, 20000.0);
+    }
+
+    #[test]
+    fn bad_or_too_long_program_files_are_errors_naming_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let long = dir.path().join("long.toml");
+        let mut text = String::from("[limits]\nspeed = 10.0\n");
+        for _ in 0..(pcr_messages::MAX_MOVES + 1) {
+            text.push_str("[[segment]]\ntype = \"dwell\"\nseconds = 0.1\n");
+        }
+        std::fs::write(&long, text).unwrap();
+        let e = program_command(&long).unwrap_err();
+        assert!(e.contains("long.toml") && e.contains("at most 32"), "{e}");
+        let bad = dir.path().join("bad.toml");
+        std::fs::write(
+            &bad,
+            "[limits]\nspeed = 10.0\n[[segment]]\ntype = \"arc\"\n",
+        )
+        .unwrap();
+        let e = program_command(&bad).unwrap_err();
+        assert!(
+            e.contains("bad.toml") && e.contains("segment[0] (arc)"),
+            "{e}"
+        );
+        let e = program_command(&dir.path().join("none.toml")).unwrap_err();
+        assert!(e.contains("none.toml"), "{e}");
+    }
+}
