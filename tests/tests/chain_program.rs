@@ -33,6 +33,27 @@ fn setup(tag: &str) -> (PathBuf, PathBuf, String) {
     (tmp, config, prefix)
 }
 
+/// Shuts a supervisor down (SIGTERM, then SIGKILL) if a test fails while it runs.
+struct Reaper(std::process::Child);
+
+impl Drop for Reaper {
+    fn drop(&mut self) {
+        if self.0.try_wait().ok().flatten().is_none() {
+            let _ = Command::new("kill")
+                .args(["-TERM", &self.0.id().to_string()])
+                .status();
+            let t0 = Instant::now();
+            while self.0.try_wait().ok().flatten().is_none()
+                && t0.elapsed() < Duration::from_secs(10)
+            {
+                std::thread::sleep(Duration::from_millis(100));
+            }
+            let _ = self.0.kill();
+            let _ = self.0.wait();
+        }
+    }
+}
+
 fn recordings(tmp: &Path) -> Vec<PathBuf> {
     std::fs::read_dir(tmp.join("rec"))
         .map(|d| d.flatten().map(|e| e.path()).collect())
@@ -140,15 +161,17 @@ fn ctl_run_program_starts_a_program_file_and_refuses_a_bad_one() {
     let (tmp, config, prefix) = setup("progctl");
     let bad = tmp.join("broken.toml");
     std::fs::write(&bad, "[limits]\nspeed = 20.0\n").unwrap();
-    let mut sup = Command::new(bin_dir().join("pcr-supervisor"))
-        .current_dir(workspace())
-        .arg("--config")
-        .arg(&config)
-        .env("RUST_LOG", "warn")
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
+    let mut sup = Reaper(
+        Command::new(bin_dir().join("pcr-supervisor"))
+            .current_dir(workspace())
+            .arg("--config")
+            .arg(&config)
+            .env("RUST_LOG", "warn")
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
     // The client runs from another folder: it sends the path made absolute.
     let ctl = |words: &[&str]| {
         let o = Command::new(bin_dir().join("pcr-supervisor"))
@@ -191,13 +214,13 @@ fn ctl_run_program_starts_a_program_file_and_refuses_a_bad_one() {
     assert!(status.contains("1 (slot): done"), "{status}");
     assert!(!ctl(&["shutdown"]).is_empty());
     let t0 = Instant::now();
-    while sup.try_wait().unwrap().is_none() && t0.elapsed() < Duration::from_secs(20) {
+    while sup.0.try_wait().unwrap().is_none() && t0.elapsed() < Duration::from_secs(20) {
         std::thread::sleep(Duration::from_millis(100));
     }
-    if sup.try_wait().unwrap().is_none() {
-        let _ = sup.kill();
-        panic!("the supervisor did not shut down");
-    }
+    assert!(
+        sup.0.try_wait().unwrap().is_some(),
+        "the supervisor did not shut down"
+    );
     assert!(recordings(&tmp).iter().any(|p| p
         .file_name()
         .is_some_and(|n| n.to_string_lossy().starts_with("slot-"))));
