@@ -4,10 +4,11 @@
 use crate::setpoint::{paper_circle, paper_program, paper_square, Move, PlanError, SetpointSource};
 use pcr_kinematics::Pose;
 use pcr_messages::{
-    command_kind, move_kind, planner_state, program_id, task_flags, Command, Correction, MoveMsg,
-    PlannerStatus, TaskSetpoint, MAX_MOVES, PROTOCOL_VERSION,
+    command_kind, move_flags, move_kind, planner_state, program_id, task_flags, Command,
+    Correction, MoveMsg, PlannerStatus, ProgramLimits, TaskSetpoint, MAX_MOVES, PROTOCOL_VERSION,
 };
 use pcr_planner::profiler::{calculate, ControlInterface, Input, Limits, State, Trajectory};
+use pcr_planner::program::{JointSettings, PathLimits};
 
 /// Why a command was refused.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -173,13 +174,26 @@ pub fn moves_of(cmd: &Command) -> Result<Vec<Move>, CommandError> {
             if n == 0 || n > MAX_MOVES {
                 return Err(CommandError::Malformed(format!("n_moves = {n}")));
             }
-            cmd.moves[..n].iter().map(move_of).collect()
+            cmd.moves[..n]
+                .iter()
+                .map(|m| move_of(m, &cmd.limits))
+                .collect()
         }
         p => Err(CommandError::Malformed(format!("unknown program id {p}"))),
     }
 }
 
-fn move_of(m: &MoveMsg) -> Result<Move, CommandError> {
+fn move_of(m: &MoveMsg, l: &ProgramLimits) -> Result<Move, CommandError> {
+    let limits = PathLimits {
+        speed: l.speed_mm_s,
+        acceleration: l.accel_mm_s2,
+        jerk: l.jerk_mm_s3,
+        blend_radius: l.blend_radius_mm,
+        rotation_radius: l.rotation_radius_mm,
+    };
+    let phi = (m.flags & move_flags::KEEP_PHI == 0).then_some(m.a[2]);
+    let speed_mm_s = (m.b[0] != 0.0).then_some(m.b[0]);
+    let continues = m.flags & move_flags::CONTINUES != 0;
     Ok(match m.kind {
         move_kind::LINE => Move::Line {
             to: Pose::new(m.a[0], m.a[1], m.a[2]),
@@ -192,17 +206,76 @@ fn move_of(m: &MoveMsg) -> Result<Move, CommandError> {
             speed_mm_s: m.b[1],
         },
         move_kind::DWELL => Move::Dwell { duration_s: m.b[0] },
+        move_kind::PATH_LINE => Move::PathLine {
+            to: [m.a[0], m.a[1]],
+            phi,
+            speed_mm_s,
+            blend_radius_mm: (m.b[1] >= 0.0).then_some(m.b[1]),
+            continues,
+            limits,
+        },
+        move_kind::ARC => Move::Arc {
+            centre: [m.a[0], m.a[1]],
+            sweep_rad: m.b[1],
+            phi,
+            speed_mm_s,
+            continues,
+            limits,
+        },
+        move_kind::JOINT => {
+            let mut steps = [0i64; 3];
+            for (s, &a) in steps.iter_mut().zip(&m.a) {
+                if !(a.is_finite() && a.fract() == 0.0 && a.abs() < 1e15) {
+                    return Err(CommandError::Malformed(format!(
+                        "joint move target {a} is not an integer number of steps"
+                    )));
+                }
+                *s = a as i64;
+            }
+            Move::Joint {
+                steps,
+                limits: JointSettings {
+                    acceleration: l.joint_accel,
+                    jerk: l.joint_jerk,
+                },
+            }
+        }
         k => return Err(CommandError::Malformed(format!("unknown move kind {k}"))),
     })
 }
 
-/// Converts moves into the wire form (at most [`MAX_MOVES`]).
+/// Converts moves into the wire form (at most [`MAX_MOVES`]). All composite-path moves must
+/// share one set of path limits and all joint moves one set of joint limits (one
+/// [`Command::limits`]).
 pub fn command_of_moves(run_id: u32, moves: &[Move]) -> Result<Command, CommandError> {
     if moves.is_empty() || moves.len() > MAX_MOVES {
         return Err(CommandError::Malformed(format!(
-            "{} moves (1..={MAX_MOVES} allowed)",
+            "{} moves (1..={MAX_MOVES} allowed in one command)",
             moves.len()
         )));
+    }
+    let mut path: Option<PathLimits> = None;
+    let mut joint: Option<JointSettings> = None;
+    for m in moves {
+        match *m {
+            Move::PathLine { limits, .. } | Move::Arc { limits, .. } => {
+                if path.is_some_and(|p| p != limits) {
+                    return Err(CommandError::Malformed(
+                        "composite moves with different path limits in one command".into(),
+                    ));
+                }
+                path = Some(limits);
+            }
+            Move::Joint { limits, .. } => {
+                if joint.is_some_and(|j| j != limits) {
+                    return Err(CommandError::Malformed(
+                        "joint moves with different joint limits in one command".into(),
+                    ));
+                }
+                joint = Some(limits);
+            }
+            _ => {}
+        }
     }
     let mut c = Command {
         kind: command_kind::RUN,
@@ -211,6 +284,25 @@ pub fn command_of_moves(run_id: u32, moves: &[Move]) -> Result<Command, CommandE
         n_moves: moves.len() as u32,
         version: PROTOCOL_VERSION,
         ..Default::default()
+    };
+    if let Some(p) = path {
+        c.limits.speed_mm_s = p.speed;
+        c.limits.accel_mm_s2 = p.acceleration;
+        c.limits.jerk_mm_s3 = p.jerk;
+        c.limits.blend_radius_mm = p.blend_radius;
+        c.limits.rotation_radius_mm = p.rotation_radius;
+    }
+    if let Some(j) = joint {
+        c.limits.joint_accel = j.acceleration;
+        c.limits.joint_jerk = j.jerk;
+    }
+    let flags = |continues: bool, phi: Option<f64>| {
+        (if continues { move_flags::CONTINUES } else { 0 })
+            | (if phi.is_none() {
+                move_flags::KEEP_PHI
+            } else {
+                0
+            })
     };
     for (w, m) in c.moves.iter_mut().zip(moves) {
         *w = match *m {
@@ -234,6 +326,37 @@ pub fn command_of_moves(run_id: u32, moves: &[Move]) -> Result<Command, CommandE
             Move::Dwell { duration_s } => MoveMsg {
                 kind: move_kind::DWELL,
                 b: [duration_s, 0.0],
+                ..Default::default()
+            },
+            Move::PathLine {
+                to,
+                phi,
+                speed_mm_s,
+                blend_radius_mm,
+                continues,
+                ..
+            } => MoveMsg {
+                kind: move_kind::PATH_LINE,
+                flags: flags(continues, phi),
+                a: [to[0], to[1], phi.unwrap_or(0.0)],
+                b: [speed_mm_s.unwrap_or(0.0), blend_radius_mm.unwrap_or(-1.0)],
+            },
+            Move::Arc {
+                centre,
+                sweep_rad,
+                phi,
+                speed_mm_s,
+                continues,
+                ..
+            } => MoveMsg {
+                kind: move_kind::ARC,
+                flags: flags(continues, phi),
+                a: [centre[0], centre[1], phi.unwrap_or(0.0)],
+                b: [speed_mm_s.unwrap_or(0.0), sweep_rad],
+            },
+            Move::Joint { steps, .. } => MoveMsg {
+                kind: move_kind::JOINT,
+                a: steps.map(|s| s as f64),
                 ..Default::default()
             },
         };

@@ -41,6 +41,6 @@ pub use plant_drive::{plant_backend, PlantDrive, PlantSensor};
 pub use recorder::Recorder;
 pub use runtime::{CycleOutput, InProcessChain, InterimChain, RunError, SimChain, SimChainError};
 pub use setpoint::{
-    paper_circle, paper_program, paper_square, Braking, InterimPathSource, Move, PlanError,
-    SetpointSource,
+    moves_of_program, paper_circle, paper_program, paper_square, Braking, InterimPathSource, Move,
+    PlanError, SetpointSource,
 };

@@ -8,6 +8,7 @@
 //! [`crate::InterpolatorStep`], which wraps any source.
 
 use pcr_kinematics::Pose;
+use pcr_planner::program::{JointSettings, PathLimits, Program, Step};
 use std::f64::consts::TAU;
 
 /// One move of a program (task space, mm, rad, s).
@@ -38,6 +39,102 @@ pub enum Move {
         /// Duration, s (>= 0).
         duration_s: f64,
     },
+    /// A line segment of a composite path: lines and arcs in a row whose later members
+    /// `continues` form one motion from rest to rest, with continuous speed through tangent
+    /// junctions and corners rounded by the blend radius.
+    PathLine {
+        /// Target x, y, mm.
+        to: [f64; 2],
+        /// Target orientation, rad (None: keep the orientation).
+        phi: Option<f64>,
+        /// Own speed limit, mm/s (None: the group's).
+        speed_mm_s: Option<f64>,
+        /// Blend radius of the corner at its end, mm (None: the group's).
+        blend_radius_mm: Option<f64>,
+        /// Continues the previous line or arc without stopping.
+        continues: bool,
+        /// Limits of the composite motion (those of its first segment count).
+        limits: PathLimits,
+    },
+    /// An arc segment of a composite path (see [`Move::PathLine`]); the radius is the distance
+    /// from the current point to the centre.
+    Arc {
+        /// Centre x, y, mm.
+        centre: [f64; 2],
+        /// Signed sweep, rad (positive: counter-clockwise).
+        sweep_rad: f64,
+        /// End orientation, rad (None: keep the orientation).
+        phi: Option<f64>,
+        /// Own speed limit, mm/s (None: the group's).
+        speed_mm_s: Option<f64>,
+        /// Continues the previous line or arc without stopping.
+        continues: bool,
+        /// Limits of the composite motion (those of its first segment count).
+        limits: PathLimits,
+    },
+    /// A synchronised rest-to-rest move of the motors to target positions (the pose follows by
+    /// forward kinematics).
+    Joint {
+        /// Target motor positions, steps.
+        steps: [i64; 3],
+        /// Motor acceleration (steps/s^2) and jerk (steps/s^3); the step rates come from the
+        /// robot configuration.
+        limits: JointSettings,
+    },
+}
+
+impl Move {
+    /// True for the segments of composite paths ([`Move::PathLine`], [`Move::Arc`]).
+    pub fn is_path_segment(&self) -> bool {
+        matches!(self, Move::PathLine { .. } | Move::Arc { .. })
+    }
+}
+
+/// The moves of a parsed program file: lines and arcs in a row continue each other (one
+/// composite motion), dwells and joint moves as they are.
+pub fn moves_of_program(p: &Program) -> Vec<Move> {
+    let mut out = Vec::with_capacity(p.segments.len());
+    let mut prev_path = false;
+    for st in &p.segments {
+        let m = match *st {
+            Step::Line {
+                to,
+                phi,
+                speed,
+                blend_radius,
+            } => Move::PathLine {
+                to,
+                phi,
+                speed_mm_s: speed,
+                blend_radius_mm: blend_radius,
+                continues: prev_path,
+                limits: p.limits,
+            },
+            Step::Arc {
+                center,
+                sweep,
+                phi,
+                speed,
+            } => Move::Arc {
+                centre: center,
+                sweep_rad: sweep,
+                phi,
+                speed_mm_s: speed,
+                continues: prev_path,
+                limits: p.limits,
+            },
+            Step::Dwell { seconds } => Move::Dwell {
+                duration_s: seconds,
+            },
+            Step::Joint { steps } => Move::Joint {
+                steps,
+                limits: p.joint,
+            },
+        };
+        prev_path = m.is_path_segment();
+        out.push(m);
+    }
+    out
 }
 
 /// Why a program cannot be planned.
@@ -54,6 +151,14 @@ pub enum PlanError {
     /// The program is empty.
     #[error("empty program")]
     Empty,
+    /// A move cannot be planned (bad geometry or limits); the message says why.
+    #[error("move {index}: {why}")]
+    Invalid {
+        /// 0-based move index.
+        index: usize,
+        /// Why.
+        why: String,
+    },
     /// The program is valid but the robot cannot follow it (workspace, limits, singularity,
     /// step rate); the message names the move, time, pose and the first violation.
     #[error("move {index}: {why}")]
@@ -247,6 +352,11 @@ impl SetpointSource for InterimPathSource {
                     }
                     segs.push((t, duration_s, Segment::Hold(at)));
                     t += duration_s;
+                }
+                Move::PathLine { .. } | Move::Arc { .. } | Move::Joint { .. } => {
+                    return Err(bad(
+                        "move kind (composite paths and joint moves need the planner source)",
+                    ))
                 }
             }
         }

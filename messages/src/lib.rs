@@ -368,7 +368,7 @@ pub mod program_id {
 }
 
 /// Maximum number of moves in one [`Command`].
-pub const MAX_MOVES: usize = 16;
+pub const MAX_MOVES: usize = 32;
 
 /// Kinds of [`MoveMsg`].
 pub mod move_kind {
@@ -378,6 +378,51 @@ pub mod move_kind {
     pub const CIRCLE: u32 = 2;
     /// Dwell b[0] s.
     pub const DWELL: u32 = 3;
+    /// Line segment of a composite path (no stop at its end if the next move continues it):
+    /// to (a[0], a[1]) mm, orientation a[2] rad (kept if [`crate::move_flags::KEEP_PHI`]), own
+    /// speed limit b[0] mm/s (0: the program's), blend radius of the corner at its end b[1] mm
+    /// (< 0: the program's). Limits in [`crate::Command::limits`].
+    pub const PATH_LINE: u32 = 4;
+    /// Arc segment of a composite path: centre (a[0], a[1]) mm, end orientation a[2] rad (kept if
+    /// [`crate::move_flags::KEEP_PHI`]), own speed limit b[0] mm/s (0: the program's), signed
+    /// sweep b[1] rad (positive: counter-clockwise); the radius is the distance from the current
+    /// point.
+    pub const ARC: u32 = 5;
+    /// Synchronised joint move of the motors to the steps (a[0], a[1], a[2]) (integers), from
+    /// rest to rest, with the joint limits of [`crate::Command::limits`].
+    pub const JOINT: u32 = 6;
+}
+
+/// Bits of [`MoveMsg::flags`].
+pub mod move_flags {
+    /// A [`crate::move_kind::PATH_LINE`] or [`crate::move_kind::ARC`] that continues the
+    /// previous line or arc without stopping (one composite motion: continuous speed through
+    /// tangent junctions, corners rounded by the blend radius).
+    pub const CONTINUES: u32 = 1;
+    /// Keep the orientation (a[2] is ignored): the end orientation of the previous segment.
+    pub const KEEP_PHI: u32 = 2;
+}
+
+/// Limits of the composite paths and joint moves of a [`Command`] (ignored by the rest-to-rest
+/// LINE, CIRCLE and DWELL moves).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("pcr::v2::ProgramLimits")]
+pub struct ProgramLimits {
+    /// Path speed, mm/s (combined metric).
+    pub speed_mm_s: f64,
+    /// Path acceleration (tangential and centripetal), mm/s^2.
+    pub accel_mm_s2: f64,
+    /// Path jerk, mm/s^3.
+    pub jerk_mm_s3: f64,
+    /// Default corner blend radius, mm (0: stop at corners).
+    pub blend_radius_mm: f64,
+    /// Rotation radius of the combined metric, mm/rad.
+    pub rotation_radius_mm: f64,
+    /// Joint moves: motor acceleration, steps/s^2.
+    pub joint_accel: f64,
+    /// Joint moves: motor jerk, steps/s^3.
+    pub joint_jerk: f64,
 }
 
 /// One move of a program on the wire.
@@ -387,8 +432,8 @@ pub mod move_kind {
 pub struct MoveMsg {
     /// [`move_kind`].
     pub kind: u32,
-    /// Reserved.
-    pub reserved: u32,
+    /// [`move_flags`].
+    pub flags: u32,
     /// First argument triple (see [`move_kind`]).
     pub a: [f64; 3],
     /// Second argument pair.
@@ -416,6 +461,8 @@ pub struct Command {
     pub resume_s: f64,
     /// The moves for [`program_id::MOVES`].
     pub moves: [MoveMsg; MAX_MOVES],
+    /// Limits of the composite paths and joint moves among `moves`.
+    pub limits: ProgramLimits,
     /// [`PROTOCOL_VERSION`].
     pub version: u32,
     /// Reserved.

@@ -14,7 +14,7 @@
 //! kinematics. `pcr plan joint --steps a,b,c` is a single joint move. Both are checked the same
 //! way (every 2 ms) and sampled every 20 ms into the same CSV.
 
-mod program;
+use pcr_planner::program;
 
 use crate::csvio::fmt;
 use anyhow::{anyhow, bail, Context, Result};

@@ -3,13 +3,15 @@
 //!
 //! Requests: `status`, `run paper|circle|square`, `run moves <move>; <move>; ...` with moves
 //! `line X Y PHI_DEG SPEED`, `circle CX CY R SPEED`, `dwell S` (mm, deg, mm/s, s),
+//! `run program <file>` (a TOML program file of lines, arcs, dwells and joint moves; the client
+//! sends the path made absolute),
 //! `pause`, `resume`, `stop`, `reset` (re-arm after a safe stop), `shutdown`.
 
 use pcr_control::Move;
 use pcr_kinematics::Pose;
 use std::io::{BufRead, BufReader, Write};
 use std::os::unix::net::UnixStream;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 /// A parsed request.
@@ -21,6 +23,8 @@ pub enum Request {
     RunBuiltin(String),
     /// Run a list of moves.
     RunMoves(Vec<Move>),
+    /// Run a program file (TOML; the path as the supervisor sees it).
+    RunProgram(PathBuf),
     /// Pause the motion.
     Pause,
     /// Resume it.
@@ -96,12 +100,15 @@ pub fn parse(line: &str) -> Result<Request, String> {
             let rest = rest.trim();
             match rest.split_once(' ') {
                 Some(("moves", m)) => Request::RunMoves(parse_moves(m)?),
+                Some(("program", f)) if !f.trim().is_empty() => {
+                    Request::RunProgram(PathBuf::from(f.trim()))
+                }
                 _ if matches!(rest, "paper" | "circle" | "square") => {
                     Request::RunBuiltin(rest.into())
                 }
                 _ => {
                     return Err(format!(
-                        "run what? {rest:?} (paper, circle, square, moves ...)"
+                        "run what? {rest:?} (paper, circle, square, moves ..., program <file>)"
                     ))
                 }
             }
@@ -142,6 +149,11 @@ mod tests {
         };
         assert_eq!(m.len(), 3);
         assert!(parse("run moves line 1 2").is_err());
+        assert_eq!(
+            parse("run program configs/programs/slot.toml").unwrap(),
+            Request::RunProgram("configs/programs/slot.toml".into())
+        );
+        assert!(parse("run program").is_err());
         assert!(parse("fly").is_err());
     }
 }

@@ -2,11 +2,12 @@
 //!
 //! * `pcr-supervisor --config configs/sim.toml` stays up and takes commands;
 //! * `pcr-supervisor --config configs/sim.toml --run paper` runs the paper's circle and square,
-//!   prints the path accuracy and exits 0;
+//!   prints the path accuracy and exits 0; `--run-file configs/programs/slot.toml` runs a program
+//!   file the same way;
 //! * `pcr-supervisor ctl --config configs/sim.toml status|run paper|pause|resume|stop|reset|shutdown`.
 
 use clap::{Parser, Subcommand};
-use pcr_supervisor::supervisor::{run, Options};
+use pcr_supervisor::supervisor::{program_command, run, Options};
 use pcr_supervisor::{ctl, SupervisorConfig};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -18,8 +19,11 @@ struct Cli {
     #[arg(long, global = true)]
     config: Option<PathBuf>,
     /// Run a program (paper, circle, square), print the summary and exit.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "run_file")]
     run: Option<String>,
+    /// Run a program file (TOML: lines, arcs, dwells, joint moves), print the summary and exit.
+    #[arg(long)]
+    run_file: Option<PathBuf>,
     #[command(subcommand)]
     cmd: Option<Sub>,
 }
@@ -27,8 +31,8 @@ struct Cli {
 #[derive(Subcommand, Debug)]
 enum Sub {
     /// Sends a command to a running supervisor: status, run paper|circle|square,
-    /// run moves "line X Y PHI_DEG SPEED; circle CX CY R SPEED; dwell S", pause, resume, stop,
-    /// reset, shutdown.
+    /// run moves "line X Y PHI_DEG SPEED; circle CX CY R SPEED; dwell S", run program FILE,
+    /// pause, resume, stop, reset, shutdown.
     Ctl {
         /// The command words.
         #[arg(required = true, trailing_var_arg = true)]
@@ -50,7 +54,15 @@ fn main() -> ExitCode {
             return ExitCode::from(78);
         }
     };
-    if let Some(Sub::Ctl { words }) = cli.cmd {
+    if let Some(Sub::Ctl { mut words }) = cli.cmd {
+        // The supervisor reads a program file from its own working directory: send it absolute.
+        if words.len() >= 3 && words[0] == "run" && words[1] == "program" {
+            let file = words[2..].join(" ");
+            if let Ok(abs) = std::path::absolute(&file) {
+                words.truncate(2);
+                words.push(abs.display().to_string());
+            }
+        }
         return match ctl::request(&cfg.socket_path(), &words.join(" ")) {
             Ok(reply) => {
                 print!("{reply}");
@@ -69,6 +81,13 @@ fn main() -> ExitCode {
             }
         };
     }
+    if let Some(file) = &cli.run_file {
+        // Refuse a bad program file before starting the chain.
+        if let Err(e) = program_command(file) {
+            eprintln!("pcr-supervisor: program error: {e}");
+            return ExitCode::from(65);
+        }
+    }
     let bin_dir = match &cfg.bin_dir {
         Some(d) => PathBuf::from(d),
         None => std::env::current_exe()
@@ -80,6 +99,7 @@ fn main() -> ExitCode {
         cfg,
         Options {
             run: cli.run,
+            run_file: cli.run_file,
             bin_dir,
         },
     ) {

@@ -18,7 +18,7 @@ use std::fs::File;
 use std::io::{BufRead, BufReader, BufWriter, Write};
 use std::os::unix::net::{UnixListener, UnixStream};
 use std::os::unix::process::CommandExt;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
 
@@ -32,8 +32,40 @@ pub const EXIT_RUN_FAILED: i32 = 1;
 pub struct Options {
     /// Run this program (`paper`, `circle`, `square`) and exit.
     pub run: Option<String>,
+    /// Run this program file (TOML, see [`program_command`]) and exit.
+    pub run_file: Option<PathBuf>,
     /// Directory of the process binaries.
     pub bin_dir: PathBuf,
+}
+
+impl Options {
+    /// True when the supervisor runs one program and exits (`--run` or `--run-file`).
+    pub fn one_shot(&self) -> bool {
+        self.run.is_some() || self.run_file.is_some()
+    }
+}
+
+/// The name of a program file's runs (and recordings): its file stem.
+pub fn program_name(file: &Path) -> String {
+    file.file_stem()
+        .map_or_else(|| "program".into(), |s| s.to_string_lossy().into_owned())
+}
+
+/// Reads a program file (TOML: lines, arcs, dwells, joint moves; see `docs/planner.md`) and
+/// converts it into a RUN command (run id 0). Errors name the file, and the key or segment.
+pub fn program_command(file: &Path) -> Result<Command, String> {
+    let name = file.display().to_string();
+    let prog = pcr_planner::program::load(&name, &pcr_planner::program::Defaults::default())
+        .map_err(|e| e.to_string())?;
+    let moves = pcr_control::moves_of_program(&prog);
+    if moves.len() > pcr_messages::MAX_MOVES {
+        return Err(format!(
+            "{name}: {} segments, but one command holds at most {} moves: split the program",
+            moves.len(),
+            pcr_messages::MAX_MOVES
+        ));
+    }
+    command_of_moves(0, &moves).map_err(|e| format!("{name}: {e}"))
 }
 
 struct Proc {
@@ -369,7 +401,7 @@ impl Supervisor {
             }
         }
         self.safe_stop = Some(why);
-        if self.opts.run.is_some() {
+        if self.opts.one_shot() {
             self.exit = Some(EXIT_SAFE_STOP);
         }
     }
@@ -474,6 +506,11 @@ impl Supervisor {
             Request::RunMoves(m) => {
                 let c = command_of_moves(0, &m).map_err(|e| e.to_string());
                 self.start_run("moves", c)
+                    .unwrap_or_else(|e| format!("error: {e}"))
+            }
+            Request::RunProgram(f) => {
+                let c = program_command(&f);
+                self.start_run(&program_name(&f), c)
                     .unwrap_or_else(|e| format!("error: {e}"))
             }
             Request::Pause | Request::Resume | Request::Stop => {
@@ -783,12 +820,16 @@ impl Supervisor {
         }
         self.finish_run_if_over(now);
         // Start the requested program once everybody is up.
-        if let Some(name) = self.opts.run.clone() {
+        if self.opts.one_shot() {
             if !self.requested_run_started && self.all_healthy() && self.safe_stop.is_none() {
                 // Give the planner a few cycles to connect to the command service.
                 if self.procs.iter().all(|p| p.hb.seq >= 3) {
                     self.requested_run_started = true;
-                    let c = Self::builtin(&name);
+                    let (name, c) = match (&self.opts.run_file, &self.opts.run) {
+                        (Some(f), _) => (program_name(f), program_command(f)),
+                        (None, Some(n)) => (n.clone(), Self::builtin(n)),
+                        (None, None) => unreachable!("one_shot() implies --run or --run-file"),
+                    };
                     if let Err(e) = self.start_run(&name, c) {
                         eprintln!("pcr-supervisor: cannot run {name}: {e}");
                         self.exit = Some(EXIT_RUN_FAILED);
@@ -871,7 +912,7 @@ impl Supervisor {
             );
         }
         // Keep the run for `status` as a finished one? Report only.
-        if self.opts.run.is_some() && self.exit.is_none() {
+        if self.opts.one_shot() && self.exit.is_none() {
             self.exit = Some(if how == "done" { 0 } else { EXIT_RUN_FAILED });
         }
     }
@@ -974,3 +1015,50 @@ pub fn run(cfg: SupervisorConfig, opts: Options) -> Result<i32> {
 }
 
 use iceoryx2::waitset::WaitSetRunResult;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn workspace_file(rel: &str) -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(rel)
+    }
+
+    #[test]
+    fn a_program_file_becomes_a_run_command_named_after_it() {
+        let f = workspace_file("configs/programs/slot.toml");
+        assert_eq!(program_name(&f), "slot");
+        let c = program_command(&f).unwrap();
+        assert_eq!(c.kind, command_kind::RUN);
+        assert_eq!(c.program, program_id::MOVES);
+        assert_eq!(c.n_moves, 10);
+        assert_eq!(c.limits.speed_mm_s, 40.0);
+        assert_eq!(c.limits.joint_jerk, 20000.0);
+    }
+
+    #[test]
+    fn bad_or_too_long_program_files_are_errors_naming_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let long = dir.path().join("long.toml");
+        let mut text = String::from("[limits]\nspeed = 10.0\n");
+        for _ in 0..(pcr_messages::MAX_MOVES + 1) {
+            text.push_str("[[segment]]\ntype = \"dwell\"\nseconds = 0.1\n");
+        }
+        std::fs::write(&long, text).unwrap();
+        let e = program_command(&long).unwrap_err();
+        assert!(e.contains("long.toml") && e.contains("at most 32"), "{e}");
+        let bad = dir.path().join("bad.toml");
+        std::fs::write(
+            &bad,
+            "[limits]\nspeed = 10.0\n[[segment]]\ntype = \"arc\"\n",
+        )
+        .unwrap();
+        let e = program_command(&bad).unwrap_err();
+        assert!(
+            e.contains("bad.toml") && e.contains("segment[0] (arc)"),
+            "{e}"
+        );
+        let e = program_command(&dir.path().join("none.toml")).unwrap_err();
+        assert!(e.contains("none.toml"), "{e}");
+    }
+}

@@ -1,4 +1,4 @@
-//! The program file of `pcr plan program`: a TOML list of segments (lines, arcs, dwells, joint
+//! The program file of `pcr plan program` and of the supervisor's `ctl run program`: a TOML list of segments (lines, arcs, dwells, joint
 //! moves) with their limits. Unknown keys are rejected naming the file and the key; bad values
 //! name the file and the segment index (`segment[i]`, 0-based, as in the file's array).
 //!
@@ -35,8 +35,34 @@
 //! steps = [250, 150, 176]  # target motor positions
 //! ```
 
-use anyhow::{anyhow, bail, Context, Result};
 use toml::{Table, Value};
+
+/// Why a program file cannot be used. The message names the file, and the key or segment
+/// (`segment[i]`, 0-based) that is wrong.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ProgramError {
+    /// The file cannot be read.
+    #[error("cannot read {file}: {why}")]
+    Read {
+        /// The file.
+        file: String,
+        /// The I/O error.
+        why: String,
+    },
+    /// The file is not a valid program (the message names the file, key and segment).
+    #[error("{0}")]
+    Invalid(String),
+}
+
+type Result<T> = std::result::Result<T, ProgramError>;
+
+macro_rules! invalid {
+    ($($t:tt)*) => { ProgramError::Invalid(format!($($t)*)) };
+}
+
+macro_rules! bail {
+    ($($t:tt)*) => { return Err(invalid!($($t)*)) };
+}
 
 /// Limits of the path segments.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -123,6 +149,7 @@ pub struct Program {
 }
 
 /// Defaults for keys the file may omit.
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Defaults {
     /// Path acceleration, mm/s^2.
     pub acceleration: f64,
@@ -132,6 +159,18 @@ pub struct Defaults {
     pub joint_acceleration: f64,
     /// Joint jerk, steps/s^3.
     pub joint_jerk: f64,
+}
+
+impl Default for Defaults {
+    /// The chain's defaults: 200 mm/s^2, 2000 mm/s^3, 2000 steps/s^2, 20000 steps/s^3.
+    fn default() -> Self {
+        Defaults {
+            acceleration: 200.0,
+            jerk: 2000.0,
+            joint_acceleration: 2000.0,
+            joint_jerk: 20000.0,
+        }
+    }
 }
 
 fn number(v: &Value) -> Option<f64> {
@@ -156,7 +195,7 @@ fn check_keys(file: &str, prefix: &str, t: &Table, allowed: &[&str]) -> Result<(
 
 /// A positive (or, with `zero_ok`, non-negative) finite number; `what` names where it is.
 fn positive(v: &Value, what: &str, zero_ok: bool) -> Result<f64> {
-    let x = number(v).ok_or_else(|| anyhow!("{what} must be a number (got {v})"))?;
+    let x = number(v).ok_or_else(|| invalid!("{what} must be a number (got {v})"))?;
     if !x.is_finite() || x < 0.0 || (x == 0.0 && !zero_ok) {
         bail!(
             "{what} must be a finite number {} (got {x})",
@@ -169,12 +208,12 @@ fn positive(v: &Value, what: &str, zero_ok: bool) -> Result<f64> {
 fn finite_array(v: &Value, what: &str, lens: &[usize]) -> Result<Vec<f64>> {
     let a = v
         .as_array()
-        .ok_or_else(|| anyhow!("{what} must be an array of numbers (got {v})"))?;
+        .ok_or_else(|| invalid!("{what} must be an array of numbers (got {v})"))?;
     let out: Vec<f64> = a
         .iter()
         .map(|x| number(x).filter(|f| f.is_finite()))
         .collect::<Option<_>>()
-        .ok_or_else(|| anyhow!("{what} must hold finite numbers (got {v})"))?;
+        .ok_or_else(|| invalid!("{what} must hold finite numbers (got {v})"))?;
     if !lens.contains(&out.len()) {
         bail!(
             "{what} must have {} entries (got {})",
@@ -190,7 +229,10 @@ fn finite_array(v: &Value, what: &str, lens: &[usize]) -> Result<Vec<f64>> {
 
 /// Reads and validates a program file.
 pub fn load(file: &str, d: &Defaults) -> Result<Program> {
-    let text = std::fs::read_to_string(file).with_context(|| format!("cannot read {file}"))?;
+    let text = std::fs::read_to_string(file).map_err(|e| ProgramError::Read {
+        file: file.to_string(),
+        why: e.to_string(),
+    })?;
     parse(&text, file, d)
 }
 
@@ -198,7 +240,7 @@ pub fn load(file: &str, d: &Defaults) -> Result<Program> {
 pub fn parse(text: &str, file: &str, d: &Defaults) -> Result<Program> {
     let root: Table = text
         .parse()
-        .map_err(|e| anyhow!("{file}: not a valid TOML file: {e}"))?;
+        .map_err(|e| invalid!("{file}: not a valid TOML file: {e}"))?;
     check_keys(file, "", &root, &["limits", "joint_limits", "segment"])?;
     let table = |k: &str| -> Result<Table> {
         match root.get(k) {
@@ -223,9 +265,9 @@ pub fn parse(text: &str, file: &str, d: &Defaults) -> Result<Program> {
     let lim = |k: &str, default: Option<f64>, zero_ok: bool| -> Result<f64> {
         match lt.get(k) {
             Some(v) => {
-                positive(v, &format!("limits.{k}"), zero_ok).map_err(|e| anyhow!("{file}: {e}"))
+                positive(v, &format!("limits.{k}"), zero_ok).map_err(|e| invalid!("{file}: {e}"))
             }
-            None => default.ok_or_else(|| anyhow!("{file}: missing key `limits.{k}`")),
+            None => default.ok_or_else(|| invalid!("{file}: missing key `limits.{k}`")),
         }
     };
     let limits = PathLimits {
@@ -235,7 +277,7 @@ pub fn parse(text: &str, file: &str, d: &Defaults) -> Result<Program> {
         blend_radius: lim("blend_radius", Some(0.0), true)?,
         rotation_radius: lim(
             "rotation_radius",
-            Some(pcr_planner::path::DEFAULT_ROTATION_RADIUS_MM),
+            Some(crate::path::DEFAULT_ROTATION_RADIUS_MM),
             false,
         )?,
     };
@@ -243,9 +285,8 @@ pub fn parse(text: &str, file: &str, d: &Defaults) -> Result<Program> {
     check_keys(file, "joint_limits.", &jt, &["acceleration", "jerk"])?;
     let jl = |k: &str, default: f64| -> Result<f64> {
         match jt.get(k) {
-            Some(v) => {
-                positive(v, &format!("joint_limits.{k}"), false).map_err(|e| anyhow!("{file}: {e}"))
-            }
+            Some(v) => positive(v, &format!("joint_limits.{k}"), false)
+                .map_err(|e| invalid!("{file}: {e}")),
             None => Ok(default),
         }
     };
@@ -265,7 +306,7 @@ pub fn parse(text: &str, file: &str, d: &Defaults) -> Result<Program> {
     for (i, v) in segs.iter().enumerate() {
         let t = v
             .as_table()
-            .ok_or_else(|| anyhow!("{file}: segment[{i}] must be a table (got {v})"))?;
+            .ok_or_else(|| invalid!("{file}: segment[{i}] must be a table (got {v})"))?;
         let kind = match t.get("type") {
             Some(Value::String(s)) => s.as_str(),
             Some(v) => bail!("{file}: segment[{i}]: `type` must be a string (got {v})"),
@@ -283,10 +324,10 @@ pub fn parse(text: &str, file: &str, d: &Defaults) -> Result<Program> {
             ),
         };
         check_keys(file, &format!("segment[{i}]."), t, allowed)?;
-        let ctx = |e: anyhow::Error| anyhow!("{file}: segment[{i}] ({kind}): {e}");
+        let ctx = |e: ProgramError| invalid!("{file}: segment[{i}] ({kind}): {e}");
         let req = |k: &str| -> Result<&Value> {
             t.get(k)
-                .ok_or_else(|| anyhow!("{file}: segment[{i}] ({kind}): missing key `{k}`"))
+                .ok_or_else(|| invalid!("{file}: segment[{i}] ({kind}): missing key `{k}`"))
         };
         let opt_pos = |k: &str, zero_ok: bool| -> Result<Option<f64>> {
             t.get(k)
@@ -309,14 +350,14 @@ pub fn parse(text: &str, file: &str, d: &Defaults) -> Result<Program> {
                 let c = finite_array(req("center")?, "`center` (x_mm, y_mm)", &[2]).map_err(ctx)?;
                 let sweep = number(req("sweep_deg")?)
                     .filter(|s| s.is_finite() && *s != 0.0)
-                    .ok_or_else(|| anyhow!("`sweep_deg` must be a finite number other than 0"))
+                    .ok_or_else(|| invalid!("`sweep_deg` must be a finite number other than 0"))
                     .map_err(ctx)?;
                 let phi = match t.get("phi_deg") {
                     None => None,
                     Some(v) => Some(
                         number(v)
                             .filter(|p| p.is_finite())
-                            .ok_or_else(|| anyhow!("`phi_deg` must be a finite number"))
+                            .ok_or_else(|| invalid!("`phi_deg` must be a finite number"))
                             .map_err(ctx)?
                             .to_radians(),
                     ),
@@ -337,7 +378,9 @@ pub fn parse(text: &str, file: &str, d: &Defaults) -> Result<Program> {
                     .as_array()
                     .filter(|a| a.len() == 3)
                     .and_then(|a| a.iter().map(|x| x.as_integer()).collect::<Option<Vec<_>>>())
-                    .ok_or_else(|| anyhow!("`steps` must be three integers (motor steps), got {v}"))
+                    .ok_or_else(|| {
+                        invalid!("`steps` must be three integers (motor steps), got {v}")
+                    })
                     .map_err(ctx)?;
                 Step::Joint {
                     steps: [a[0], a[1], a[2]],
