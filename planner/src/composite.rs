@@ -26,7 +26,7 @@
 //! respects the speed, acceleration and jerk limits along the path, and stops exactly at the end.
 //! Everything is fixed-size: planning and sampling never allocate.
 
-use crate::path::{Pose, DEFAULT_ROTATION_RADIUS_MM};
+use crate::path::{Pose, Primitive, DEFAULT_ROTATION_RADIUS_MM};
 use crate::profiler::{step1::Step1, ControlInterface, Limits, State};
 
 /// Maximal number of segments of a composite path (after corner blending).
@@ -93,34 +93,8 @@ pub enum SegmentSource {
     Blend(usize),
 }
 
-/// Geometry of one segment (mm, rad).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum SegmentGeometry {
-    /// Straight line, orientation interpolated linearly.
-    Line {
-        /// Start pose.
-        a: Pose,
-        /// End pose.
-        b: Pose,
-    },
-    /// Circular arc, orientation interpolated linearly.
-    Arc {
-        /// Centre x, mm.
-        cx: f64,
-        /// Centre y, mm.
-        cy: f64,
-        /// Radius, mm.
-        r: f64,
-        /// Polar angle of the start point, rad.
-        theta0: f64,
-        /// Signed sweep, rad (positive: counter-clockwise).
-        sweep: f64,
-        /// Start orientation, rad.
-        phi0: f64,
-        /// End orientation, rad.
-        phi1: f64,
-    },
-}
+/// Geometry of one segment (mm, rad): a line or an arc, as in [`crate::path`].
+pub type SegmentGeometry = Primitive;
 
 /// One segment of a composite path.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -134,22 +108,7 @@ pub struct Segment {
 
 impl Segment {
     fn new(geo: SegmentGeometry, rot: f64, speed: f64, source: SegmentSource) -> Segment {
-        let len = match geo {
-            SegmentGeometry::Line { a, b } => {
-                let (dx, dy, dp) = (b.x - a.x, b.y - a.y, rot * (b.phi - a.phi));
-                (dx * dx + dy * dy + dp * dp).sqrt()
-            }
-            SegmentGeometry::Arc {
-                r,
-                sweep,
-                phi0,
-                phi1,
-                ..
-            } => {
-                let (l, p) = (r * sweep, rot * (phi1 - phi0));
-                (l * l + p * p).sqrt()
-            }
-        };
+        let len = geo.length(rot);
         Segment {
             geo,
             len,
@@ -202,45 +161,7 @@ impl Segment {
 
     /// Pose and d(pose)/ds (1/1, 1/1, rad/mm) at length `s` mm from the segment start (clamped).
     pub fn sample(&self, s: f64) -> (Pose, Pose) {
-        let s = s.clamp(0.0, self.len);
-        let (u, k) = if self.len > 0.0 {
-            (s / self.len, 1.0 / self.len)
-        } else {
-            (0.0, 0.0)
-        };
-        match self.geo {
-            SegmentGeometry::Line { a, b } => {
-                let p = if s >= self.len {
-                    b
-                } else {
-                    Pose::new(
-                        a.x + (b.x - a.x) * u,
-                        a.y + (b.y - a.y) * u,
-                        a.phi + (b.phi - a.phi) * u,
-                    )
-                };
-                (
-                    p,
-                    Pose::new((b.x - a.x) * k, (b.y - a.y) * k, (b.phi - a.phi) * k),
-                )
-            }
-            SegmentGeometry::Arc {
-                cx,
-                cy,
-                r,
-                theta0,
-                sweep,
-                phi0,
-                phi1,
-            } => {
-                let th = theta0 + sweep * u;
-                let (sn, c) = th.sin_cos();
-                (
-                    Pose::new(cx + r * c, cy + r * sn, phi0 + (phi1 - phi0) * u),
-                    Pose::new(-r * sn * sweep * k, r * c * sweep * k, (phi1 - phi0) * k),
-                )
-            }
-        }
+        self.geo.sample(self.len, s)
     }
 
     /// Start pose.

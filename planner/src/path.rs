@@ -64,23 +64,95 @@ pub enum PathError {
     Vertices(usize),
 }
 
+/// A line or an arc in (x, y, phi), the pieces both [`Path`] and the composite paths of
+/// [`crate::composite`] are made of.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Primitive {
+    /// Straight line, orientation interpolated linearly.
+    Line {
+        /// Start pose.
+        a: Pose,
+        /// End pose.
+        b: Pose,
+    },
+    /// Circular arc, orientation interpolated linearly.
+    Arc {
+        /// Centre x, mm.
+        cx: f64,
+        /// Centre y, mm.
+        cy: f64,
+        /// Radius, mm.
+        r: f64,
+        /// Polar angle of the start point, rad.
+        theta0: f64,
+        /// Signed sweep, rad (positive: counter-clockwise).
+        sweep: f64,
+        /// Start orientation, rad.
+        phi0: f64,
+        /// End orientation, rad.
+        phi1: f64,
+    },
+}
+
+impl Primitive {
+    /// Length in the combined metric with rotation radius `rot` (mm/rad), mm.
+    pub fn length(&self, rot: f64) -> f64 {
+        match *self {
+            Primitive::Line { a, b } => seg_len(&a, &b, rot),
+            Primitive::Arc {
+                r,
+                sweep,
+                phi0,
+                phi1,
+                ..
+            } => {
+                let (l, p) = (r * sweep, rot * (phi1 - phi0));
+                (l * l + p * p).sqrt()
+            }
+        }
+    }
+
+    /// Pose and d(pose)/ds at length `s` (clamped to [0, `len`]) of a primitive whose
+    /// combined length is `len` mm; the end is reached exactly.
+    pub fn sample(&self, len: f64, s: f64) -> (Pose, Pose) {
+        let s = s.clamp(0.0, len);
+        let (u, k) = if len > 0.0 {
+            (s / len, 1.0 / len)
+        } else {
+            (0.0, 0.0)
+        };
+        match *self {
+            Primitive::Line { a, b } => {
+                let p = if s >= len { b } else { a.lerp(&b, u) };
+                (
+                    p,
+                    Pose::new((b.x - a.x) * k, (b.y - a.y) * k, (b.phi - a.phi) * k),
+                )
+            }
+            Primitive::Arc {
+                cx,
+                cy,
+                r,
+                theta0,
+                sweep,
+                phi0,
+                phi1,
+            } => {
+                let (sn, c) = (theta0 + sweep * u).sin_cos();
+                (
+                    Pose::new(cx + r * c, cy + r * sn, phi0 + (phi1 - phi0) * u),
+                    Pose::new(-r * sn * sweep * k, r * c * sweep * k, (phi1 - phi0) * k),
+                )
+            }
+        }
+    }
+}
+
 // Fixed size on purpose: paths are Copy and never allocate.
 #[allow(clippy::large_enum_variant)]
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Geometry {
-    Line {
-        a: Pose,
-        b: Pose,
-    },
-    Arc {
-        cx: f64,
-        cy: f64,
-        r: f64,
-        theta0: f64,
-        sweep: f64,
-        phi0: f64,
-        phi1: f64,
-    },
+    Single(Primitive),
     Polyline {
         pts: [Pose; MAX_VERTICES],
         /// Cumulative length at each vertex.
@@ -123,7 +195,7 @@ impl Path {
         finite_pose(&a)?;
         finite_pose(&b)?;
         let mut p = Path {
-            geo: Geometry::Line { a, b },
+            geo: Geometry::Single(Primitive::Line { a, b }),
             rot_radius: DEFAULT_ROTATION_RADIUS_MM,
             length: 0.0,
         };
@@ -157,7 +229,7 @@ impl Path {
             return Err(PathError::NotPositive("radius", r));
         }
         let mut p = Path {
-            geo: Geometry::Arc {
+            geo: Geometry::Single(Primitive::Arc {
                 cx,
                 cy,
                 r,
@@ -165,7 +237,7 @@ impl Path {
                 sweep,
                 phi0,
                 phi1,
-            },
+            }),
             rot_radius: DEFAULT_ROTATION_RADIUS_MM,
             length: 0.0,
         };
@@ -252,17 +324,7 @@ impl Path {
     fn update_length(&mut self) {
         let r = self.rot_radius;
         self.length = match &mut self.geo {
-            Geometry::Line { a, b } => seg_len(a, b, r),
-            Geometry::Arc {
-                r: rad,
-                sweep,
-                phi0,
-                phi1,
-                ..
-            } => {
-                let (l, p) = (*rad * *sweep, r * (*phi1 - *phi0));
-                (l * l + p * p).sqrt()
-            }
+            Geometry::Single(p) => p.length(r),
             Geometry::Polyline { pts, cum, n } => {
                 cum[0] = 0.0;
                 for i in 1..*n {
@@ -293,39 +355,7 @@ impl Path {
     pub fn sample(&self, s: f64) -> (Pose, Pose) {
         let s = s.clamp(0.0, self.length);
         match &self.geo {
-            Geometry::Line { a, b } => {
-                if self.length == 0.0 {
-                    return (*a, Pose::default());
-                }
-                let u = s / self.length;
-                let d = Pose::new(b.x - a.x, b.y - a.y, b.phi - a.phi).scaled(1.0 / self.length);
-                (a.lerp(b, u), d)
-            }
-            Geometry::Arc {
-                cx,
-                cy,
-                r,
-                theta0,
-                sweep,
-                phi0,
-                phi1,
-            } => {
-                let u = if self.length > 0.0 {
-                    s / self.length
-                } else {
-                    0.0
-                };
-                let th = theta0 + sweep * u;
-                let (c, sn) = (th.cos(), th.sin());
-                let pose = Pose::new(cx + r * c, cy + r * sn, phi0 + (phi1 - phi0) * u);
-                let k = if self.length > 0.0 {
-                    1.0 / self.length
-                } else {
-                    0.0
-                };
-                let d = Pose::new(-r * sn * sweep * k, r * c * sweep * k, (phi1 - phi0) * k);
-                (pose, d)
-            }
+            Geometry::Single(p) => p.sample(self.length, s),
             Geometry::Polyline { pts, cum, n } => {
                 let mut i = 1;
                 while i < *n - 1 && cum[i] < s {
