@@ -558,24 +558,33 @@ fn ctl_runs_a_list_of_moves_with_pause_and_resume() {
     );
     std::thread::sleep(Duration::from_millis(500));
     assert_eq!(chain.ctl("pause").trim(), "paused");
-    std::thread::sleep(Duration::from_millis(200));
+    let at_pause = chain.ctl("status");
+    // The pause brakes along the path (well under a second), then holds.
+    std::thread::sleep(Duration::from_millis(1500));
     let a = chain.ctl("status");
     assert!(a.contains("run 1 (moves): paused"), "{a}");
     std::thread::sleep(Duration::from_millis(500));
     let b = chain.ctl("status");
-    let progress = |s: &str| -> String {
+    let progress = |s: &str| -> f64 {
         s.split("progress ")
             .nth(1)
             .unwrap()
             .split('/')
             .next()
             .unwrap()
-            .to_string()
+            .parse()
+            .unwrap()
     };
     assert_eq!(
         progress(&a),
         progress(&b),
         "paused program time must not advance"
+    );
+    // Braking from rate 1 to 0 here (peak 40 mm/s) covers about 0.25 s of program time; a
+    // freeze or a rewind would add at most the status's staleness (< 0.1 s).
+    assert!(
+        progress(&a) > progress(&at_pause) + 0.1,
+        "a pause brakes forward along the path, it neither freezes nor goes back: {at_pause} {a}"
     );
     assert_eq!(chain.ctl("resume").trim(), "resumed");
     let mut o = Vec::new();

@@ -129,6 +129,8 @@ fn run(a: Args) -> Result<()> {
     let mut last_state_ns = monotonic_ns();
     let mut drive_holding = false;
     let mut auto_paused = false;
+    // Taken back to the drive's setpoint since it stopped following.
+    let mut rewound = false;
 
     let ws = WaitSetBuilder::new()
         .create::<ipc::Service>()
@@ -188,10 +190,10 @@ fn run(a: Args) -> Result<()> {
                 let cmd = cmd.payload();
                 if matches!(cmd.kind, command_kind::RUN | command_kind::RECOVER) {
                     // Plan on the worker thread, never in the cycle.
-                    let busy = interp.can_start().err().or_else(|| {
-                        planning
-                            .map(|id| CommandError::Malformed(format!("run {id} is being planned")))
-                    });
+                    let busy = interp
+                        .can_start()
+                        .err()
+                        .or(planning.map(CommandError::Busy));
                     if let Some(e) = busy {
                         tracing::error!(run_id = cmd.run_id, "command refused: {e}");
                         continue;
@@ -217,13 +219,10 @@ fn run(a: Args) -> Result<()> {
                     Ok(()) => {
                         commanded = true;
                         tracing::info!(kind = cmd.kind, run_id = cmd.run_id, "command");
-                        // A pause holds where the robot is: back to the setpoint the
-                        // drive executed last (it may have stopped on stale setpoints).
+                        // A commanded pause brakes along the path (if the drive does not
+                        // follow, the check below takes it back to where the drive stopped).
                         if cmd.kind == command_kind::PAUSE {
                             auto_paused = false;
-                        }
-                        if cmd.kind == command_kind::PAUSE && interp.rewind_to_seq(executed_seq) {
-                            tracing::info!(seq = executed_seq, "paused at the executed setpoint");
                         }
                     }
                     Err(e) => tracing::error!("command refused: {e}"),
@@ -244,17 +243,28 @@ fn run(a: Args) -> Result<()> {
                     }
                 }
             }
-            // Self-protection: while a program runs, the drive must follow. If its states stop
-            // (driver stalled or dead) or it holds on stale setpoints (IK gone), pause at the
-            // setpoint it executed last; resume once it follows again.
+            // Self-protection: while a program runs or is paused, the drive must follow. If
+            // its states stop (driver stalled or dead) or it holds on stale setpoints (IK gone),
+            // the program goes back (once) to the setpoint the drive executed last, paused, so
+            // that it continues from where the robot is; it resumes by itself once the drive
+            // follows again unless somebody else paused it.
             let drive_ok = wake.saturating_sub(last_state_ns) <= 3 * period_ns && !drive_holding;
             let state = interp.status(t).state;
-            if state == planner_state::RUNNING && !drive_ok {
-                let _ = interp.command(&simple_command(command_kind::PAUSE, 0, 0));
+            if drive_ok {
+                rewound = false;
+            } else if !rewound && matches!(state, planner_state::RUNNING | planner_state::PAUSED) {
+                if state == planner_state::RUNNING {
+                    let _ = interp.command(&simple_command(command_kind::PAUSE, 0, 0));
+                    auto_paused = true;
+                }
                 interp.rewind_to_seq(executed_seq);
-                auto_paused = true;
-                tracing::warn!(seq = executed_seq, "drive not following: program paused");
-            } else if auto_paused && drive_ok && state == planner_state::PAUSED {
+                rewound = true;
+                tracing::warn!(
+                    seq = executed_seq,
+                    "drive not following: held at its setpoint"
+                );
+            }
+            if auto_paused && drive_ok && state == planner_state::PAUSED {
                 let _ = interp.command(&simple_command(command_kind::RESUME, 0, 0));
                 auto_paused = false;
                 tracing::info!("drive following again: program resumed");
