@@ -722,11 +722,10 @@ impl Supervisor {
         if let Some(run) = &mut self.run {
             if run.ended.is_none() && run.recover == Some(false) && healthy {
                 // The planner is back: it re-plans the program and continues it, paused, at
-                // the setpoint the drive executed last.
-                let (Some(origin), Some(executed)) = (run.origin, run.executed) else {
-                    unreachable!("checked when the planner failed")
-                };
+                // the setpoint the drive executed last (both known: checked when it failed).
                 let mut c = run.cmd;
+                let origin = run.origin.unwrap_or(c.origin);
+                let executed = run.executed.unwrap_or(origin);
                 c.kind = command_kind::RECOVER;
                 c.origin = origin;
                 c.executed = executed;
