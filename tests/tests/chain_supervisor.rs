@@ -80,6 +80,19 @@ name = "mocap"
         (c, out, err)
     }
 
+    /// Waits until every process started and `ctl status` reports the chain ready.
+    fn wait_ready(&self, err: &Receiver<String>, seen: &mut Vec<String>) {
+        assert!(
+            wait_for(err, "started mocap", Duration::from_secs(30), seen),
+            "{seen:?}"
+        );
+        let end = Instant::now() + Duration::from_secs(30);
+        while !self.ctl("status").starts_with("state: ready") {
+            assert!(Instant::now() < end, "chain not ready");
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+
     fn ctl(&self, words: &str) -> String {
         let o = Command::new(bin_dir().join("pcr-supervisor"))
             .arg("--config")
@@ -283,17 +296,7 @@ fn a_hung_process_is_detected_killed_and_restarted() {
     let chain = Chain::new("hang", "heartbeat_timeout_ms = 600.0", "");
     let (mut sup, _out, err) = chain.supervisor(&[]);
     let mut e = Vec::new();
-    assert!(wait_for(
-        &err,
-        "started mocap",
-        Duration::from_secs(30),
-        &mut e
-    ));
-    let end = Instant::now() + Duration::from_secs(30);
-    while !chain.ctl("status").starts_with("state: ready") {
-        assert!(Instant::now() < end, "chain not ready");
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    chain.wait_ready(&err, &mut e);
     let ik = chain.pid_of("ik").unwrap();
     kill(ik, libc::SIGSTOP);
     assert!(
@@ -334,17 +337,7 @@ fn a_version_mismatched_process_is_refused() {
     let chain = Chain::new("ver", "heartbeat_timeout_ms = 2000.0", "");
     let (mut sup, _out, err) = chain.supervisor(&[]);
     let mut e = Vec::new();
-    assert!(wait_for(
-        &err,
-        "started mocap",
-        Duration::from_secs(30),
-        &mut e
-    ));
-    let end = Instant::now() + Duration::from_secs(30);
-    while !chain.ctl("status").starts_with("state: ready") {
-        assert!(Instant::now() < end, "chain not ready");
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    chain.wait_ready(&err, &mut e);
     let o = Command::new(bin_dir().join("pcr-ik"))
         .current_dir(workspace())
         .args(["--prefix", &chain.prefix, "--protocol-version", "99"])
@@ -539,17 +532,7 @@ fn ctl_runs_a_list_of_moves_with_pause_and_resume() {
     let chain = Chain::new("ctl", "heartbeat_timeout_ms = 2000.0", "");
     let (mut sup, out, err) = chain.supervisor(&[]);
     let mut e = Vec::new();
-    assert!(wait_for(
-        &err,
-        "started mocap",
-        Duration::from_secs(30),
-        &mut e
-    ));
-    let end = Instant::now() + Duration::from_secs(30);
-    while !chain.ctl("status").starts_with("state: ready") {
-        assert!(Instant::now() < end, "chain not ready");
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    chain.wait_ready(&err, &mut e);
     let r = chain.ctl("run moves line 20 10 0 30; dwell 0.5; circle 0 0 20 40; line 0 0 0 30");
     assert!(r.contains("run 1 (moves) started"), "{r}");
     assert!(
