@@ -12,6 +12,9 @@
 use std::io::{BufRead, Write};
 use std::path::Path;
 
+pub mod settled;
+pub use settled::{settled_poses, SettledError, SettledPose};
+
 /// Why a recording could not be read or written.
 #[derive(Debug, thiserror::Error)]
 pub enum RecordingError {
@@ -68,10 +71,31 @@ pub enum RecordingError {
 }
 
 /// Every column the format defines, in the recommended order.
-pub const KNOWN_COLUMNS: [&str; 19] = [
+pub const KNOWN_COLUMNS: [&str; 20] = [
     "t_s", "q1", "q2", "q3", "x_mm", "y_mm", "phi_deg", "m1x_mm", "m1y_mm", "m2x_mm", "m2y_mm",
-    "m3x_mm", "m3y_mm", "xp_mm", "yp_mm", "phip_deg", "pose_id", "rep", "settled",
+    "m3x_mm", "m3y_mm", "xp_mm", "yp_mm", "phip_deg", "pose_id", "rep", "settled", "set",
 ];
+
+/// The experimenter's split of a row (column `set`): tools that fit use `train` rows and report
+/// on `test` rows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Split {
+    /// Used for fitting.
+    Train,
+    /// Held out: used only to report.
+    Test,
+}
+
+impl Split {
+    /// The cell text (`train` / `test`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Split::Train => "train",
+            Split::Test => "test",
+        }
+    }
+}
 
 /// One row (one control cycle). Empty cells are `None`.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -92,6 +116,8 @@ pub struct Row {
     pub rep: Option<u64>,
     /// Measured at rest at a target.
     pub settled: Option<bool>,
+    /// The experimenter's train/test split.
+    pub set: Option<Split>,
     /// Cells of the unknown columns, in the order of [`Recording::extra_columns`].
     pub extra: Vec<Option<String>>,
 }
@@ -318,11 +344,18 @@ impl Recording {
                             row.rep = Some(v as u64);
                         }
                     }
-                    _ => {
+                    18 => {
                         row.settled = Some(match cell {
                             "0" => false,
                             "1" => true,
                             _ => return Err(bad("must be 0 or 1")),
+                        })
+                    }
+                    _ => {
+                        row.set = Some(match cell {
+                            "train" => Split::Train,
+                            "test" => Split::Test,
+                            _ => return Err(bad("must be `train` or `test`")),
                         })
                     }
                 }
@@ -439,7 +472,8 @@ fn known_cells(row: &Row, idx: &[usize]) -> Result<Vec<String>, String> {
             13..=15 => fmt(name, row.planned[k - 13])?,
             16 => row.pose_id.map_or(String::new(), |v| v.to_string()),
             17 => row.rep.map_or(String::new(), |v| v.to_string()),
-            _ => row.settled.map_or(String::new(), |v| (v as u8).to_string()),
+            18 => row.settled.map_or(String::new(), |v| (v as u8).to_string()),
+            _ => row.set.map_or(String::new(), |v| v.as_str().to_string()),
         });
     }
     Ok(cells)

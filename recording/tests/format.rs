@@ -161,3 +161,20 @@ fn numbers_are_written_compactly_and_read_back_exactly() {
         assert_eq!(t.parse::<f64>().unwrap(), x, "{t}");
     }
 }
+
+#[test]
+fn set_column_reads_and_writes_train_and_test() {
+    let r = read("t_s,q1,q2,q3,set\n0,1,2,3,train\n1,1,2,3,test\n2,1,2,3,\n").unwrap();
+    assert_eq!(r.rows[0].set, Some(pcr_recording::Split::Train));
+    assert_eq!(r.rows[1].set, Some(pcr_recording::Split::Test));
+    assert_eq!(r.rows[2].set, None);
+    let mut out = Vec::new();
+    r.write(&mut out).unwrap();
+    let text = String::from_utf8(out).unwrap();
+    assert!(
+        text.contains("t_s,q1,q2,q3,set\n0,1,2,3,train\n1,1,2,3,test\n2,1,2,3,\n"),
+        "{text}"
+    );
+    let e = err("t_s,q1,q2,q3,set\n0,1,2,3,validation\n");
+    assert!(e.contains("`set`") && e.contains("train"), "{e}");
+}
