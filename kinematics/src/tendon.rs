@@ -120,10 +120,10 @@ impl TendonMap {
                 out[1] = dl;
                 out[2] = odd(dl, a.ln_1p());
             }
-            TendonMapKind::Log2 => {
-                let l = a.ln_1p();
-                out[1] = odd(dl, l);
-                out[2] = odd(dl, l * l);
+            TendonMapKind::PolyLog => {
+                out[1] = dl;
+                out[2] = dl * a;
+                out[3] = odd(dl, a.ln_1p());
             }
         }
         n
@@ -170,13 +170,10 @@ impl TendonMap {
                 k[0] + k[1] * dl + odd(dl, k[2] * a.ln_1p()),
                 k[1] + k[2] / (1.0 + a),
             ),
-            TendonMapKind::Log2 => {
-                let l = a.ln_1p();
-                (
-                    k[0] + odd(dl, k[1] * l + k[2] * l * l),
-                    (k[1] + 2.0 * k[2] * l) / (1.0 + a),
-                )
-            }
+            TendonMapKind::PolyLog => (
+                k[0] + k[1] * dl + k[2] * dl * a + odd(dl, k[3] * a.ln_1p()),
+                k[1] + 2.0 * k[2] * a + k[3] / (1.0 + a),
+            ),
         }
     }
 
@@ -309,6 +306,53 @@ mod tests {
                 assert!((back - dl).abs() < 1e-9, "{kind}: {back} vs {dl}");
             }
         }
+    }
+
+    #[test]
+    fn table_one_forms_on_positive_displacements() {
+        // For dl > 0 each family is the paper's form, with ln(1 + dl) for ln(dl).
+        let k = [2e-4, 1.1e-3, -3e-5, 4e-6, 7e-6, -2e-6, 1e-6];
+        let forms: [(TendonMapKind, fn(f64, &[f64; 7]) -> f64); 13] = [
+            (TendonMapKind::Linear, |d, k| k[0] * d),
+            (TendonMapKind::Affine, |d, k| k[0] + k[1] * d),
+            (TendonMapKind::Poly2, |d, k| k[0] + k[1] * d + k[2] * d * d),
+            (TendonMapKind::Poly3, |d, k| {
+                k[0] + k[1] * d + k[2] * d * d + k[3] * d * d * d
+            }),
+            (TendonMapKind::Root2, |d, k| {
+                k[0] + k[1] * d + k[2] * d.sqrt()
+            }),
+            (TendonMapKind::Root3, |d, k| {
+                k[0] + k[1] * d + k[2] * d.sqrt() + k[3] * d.cbrt()
+            }),
+            (TendonMapKind::Root4, |d, k| {
+                k[0] + k[1] * d + k[2] * d.sqrt() + k[3] * d.cbrt() + k[4] * d.powf(0.25)
+            }),
+            (TendonMapKind::Root5, |d, k| {
+                k[0] + k[1] * d + (2..6).map(|j| k[j] * d.powf(1.0 / j as f64)).sum::<f64>()
+            }),
+            (TendonMapKind::Root6, |d, k| {
+                k[0] + k[1] * d + (2..7).map(|j| k[j] * d.powf(1.0 / j as f64)).sum::<f64>()
+            }),
+            (TendonMapKind::Log, |d, k| k[0] * d.ln_1p()),
+            (TendonMapKind::LogAffine, |d, k| k[0] + k[1] * d.ln_1p()),
+            (TendonMapKind::LinLog, |d, k| {
+                k[0] + k[1] * d + k[2] * d.ln_1p()
+            }),
+            (TendonMapKind::PolyLog, |d, k| {
+                k[0] + k[1] * d + k[2] * d * d + k[3] * d.ln_1p()
+            }),
+        ];
+        for (i, (kind, f)) in forms.iter().enumerate() {
+            assert_eq!(kind.table_index(), i + 1);
+            assert_eq!(TendonMapKind::from_table_index(i + 1), Some(*kind));
+            let m = TendonMap::new(*kind, &k[..kind.n_coeffs()]);
+            for dl in [0.01, 0.7, 2.5, 6.0] {
+                assert!((m.kappa(dl) - f(dl, &k)).abs() < 1e-15, "{kind} at {dl}");
+            }
+        }
+        assert_eq!(TendonMapKind::from_table_index(0), None);
+        assert_eq!(TendonMapKind::from_table_index(14), None);
     }
 
     #[test]

@@ -2,9 +2,15 @@
 //!
 //! Only the *specification* (which function, which coefficients) lives here; evaluation,
 //! derivatives and inversion are in `pcr-kinematics::tendon`. The thirteen candidate functions
-//! follow the regression families of the paper's Table I (Nuelle et al.): polynomials, root
-//! series and logarithmic forms. Each non-constant basis function `b(dl)` is extended to negative
-//! displacements as an odd function, `b(-dl) = -b(dl)`; the constant `k0` stays an offset.
+//! are the regression functions of the paper's Table I (Nuelle et al.), in its order and forms:
+//! polynomials, root series and logarithmic forms.
+//!
+//! The paper writes them for dl as it is; roots and logarithms are undefined for dl <= 0, and the
+//! tendons of the robot move both ways. Our extension (docs/calibration.md, "Table I"):
+//! every non-constant basis function is odd, `b(-dl) = -b(dl)`, and the constant `k0` stays an
+//! offset. So `dl^2` reads `dl |dl|`, `dl^(1/n)` reads `sgn(dl) |dl|^(1/n)`, and `ln(dl)` reads
+//! `sgn(dl) ln(1 + |dl|)` (ln(dl) has a pole at dl = 0, inside the tendons' travel; `ln(1 + dl)`
+//! is finite there, has slope 1 at zero from both sides, and tends to ln(dl) for large dl).
 
 use serde::{Deserialize, Serialize};
 
@@ -36,8 +42,9 @@ pub enum TendonMapKind {
     LogAffine,
     /// kappa = k0 + k1 dl + k2 sgn(dl) ln(1 + |dl|)
     LinLog,
-    /// kappa = k0 + k1 sgn(dl) ln(1 + |dl|) + k2 sgn(dl) ln(1 + |dl|)^2
-    Log2,
+    /// kappa = k0 + k1 dl + k2 dl|dl| + k3 sgn(dl) ln(1 + |dl|)
+    /// (paper: k0 + k1 dl + k2 dl^2 + k3 ln(dl))
+    PolyLog,
 }
 
 impl TendonMapKind {
@@ -55,7 +62,7 @@ impl TendonMapKind {
         TendonMapKind::Log,
         TendonMapKind::LogAffine,
         TendonMapKind::LinLog,
-        TendonMapKind::Log2,
+        TendonMapKind::PolyLog,
     ];
 
     /// Number of coefficients k0, k1, ... the family takes (Linear and Log have no k0).
@@ -63,8 +70,8 @@ impl TendonMapKind {
         match self {
             TendonMapKind::Linear | TendonMapKind::Log => 1,
             TendonMapKind::Affine | TendonMapKind::LogAffine => 2,
-            TendonMapKind::Poly2 | TendonMapKind::LinLog | TendonMapKind::Log2 => 3,
-            TendonMapKind::Poly3 => 4,
+            TendonMapKind::Poly2 | TendonMapKind::LinLog => 3,
+            TendonMapKind::Poly3 | TendonMapKind::PolyLog => 4,
             TendonMapKind::Root2 => 3,
             TendonMapKind::Root3 => 4,
             TendonMapKind::Root4 => 5,
@@ -93,7 +100,59 @@ impl TendonMapKind {
             TendonMapKind::Log => "log",
             TendonMapKind::LogAffine => "log_affine",
             TendonMapKind::LinLog => "lin_log",
-            TendonMapKind::Log2 => "log2",
+            TendonMapKind::PolyLog => "poly_log",
+        }
+    }
+
+    /// The function's number in the paper's Table I (1..=13).
+    pub fn table_index(self) -> usize {
+        Self::ALL
+            .iter()
+            .position(|k| *k == self)
+            .map_or(0, |i| i + 1)
+    }
+
+    /// The family with Table I number `index` (1..=13).
+    pub fn from_table_index(index: usize) -> Option<TendonMapKind> {
+        index.checked_sub(1).and_then(|i| Self::ALL.get(i).copied())
+    }
+
+    /// The form as the paper's Table I writes it (valid for dl > 0).
+    pub fn paper_form(self) -> &'static str {
+        match self {
+            TendonMapKind::Linear => "k0 dl",
+            TendonMapKind::Affine => "k0 + k1 dl",
+            TendonMapKind::Poly2 => "k0 + k1 dl + k2 dl^2",
+            TendonMapKind::Poly3 => "k0 + k1 dl + k2 dl^2 + k3 dl^3",
+            TendonMapKind::Root2 => "k0 + k1 dl + k2 dl^(1/2)",
+            TendonMapKind::Root3 => "k0 + k1 dl + k2 dl^(1/2) + k3 dl^(1/3)",
+            TendonMapKind::Root4 => "k0 + k1 dl + k2 dl^(1/2) + k3 dl^(1/3) + k4 dl^(1/4)",
+            TendonMapKind::Root5 => "k0 + k1 dl + k2 dl^(1/2) + ... + k5 dl^(1/5)",
+            TendonMapKind::Root6 => "k0 + k1 dl + k2 dl^(1/2) + ... + k6 dl^(1/6)",
+            TendonMapKind::Log => "k0 ln(dl)",
+            TendonMapKind::LogAffine => "k0 + k1 ln(dl)",
+            TendonMapKind::LinLog => "k0 + k1 dl + k2 ln(dl)",
+            TendonMapKind::PolyLog => "k0 + k1 dl + k2 dl^2 + k3 ln(dl)",
+        }
+    }
+
+    /// The form as evaluated for every dl (the odd extension of the paper's form), with the
+    /// coefficients named in the order they are stored (k0 first, as in the paper).
+    pub fn extended_form(self) -> &'static str {
+        match self {
+            TendonMapKind::Linear => "k0 dl",
+            TendonMapKind::Affine => "k0 + k1 dl",
+            TendonMapKind::Poly2 => "k0 + k1 dl + k2 dl|dl|",
+            TendonMapKind::Poly3 => "k0 + k1 dl + k2 dl|dl| + k3 dl^3",
+            TendonMapKind::Root2 => "k0 + k1 dl + k2 s|dl|^(1/2)",
+            TendonMapKind::Root3 => "k0 + k1 dl + k2 s|dl|^(1/2) + k3 s|dl|^(1/3)",
+            TendonMapKind::Root4 => "k0 + k1 dl + k2 s|dl|^(1/2) + k3 s|dl|^(1/3) + k4 s|dl|^(1/4)",
+            TendonMapKind::Root5 => "k0 + k1 dl + k2 s|dl|^(1/2) + ... + k5 s|dl|^(1/5)",
+            TendonMapKind::Root6 => "k0 + k1 dl + k2 s|dl|^(1/2) + ... + k6 s|dl|^(1/6)",
+            TendonMapKind::Log => "k0 s ln(1 + |dl|)",
+            TendonMapKind::LogAffine => "k0 + k1 s ln(1 + |dl|)",
+            TendonMapKind::LinLog => "k0 + k1 dl + k2 s ln(1 + |dl|)",
+            TendonMapKind::PolyLog => "k0 + k1 dl + k2 dl|dl| + k3 s ln(1 + |dl|)",
         }
     }
 }
@@ -106,8 +165,8 @@ impl std::fmt::Display for TendonMapKind {
 
 /// A tendon map of one leg as written in the robot configuration.
 ///
-/// `coeffs` are k0, k1, ... for families with an offset and k1, ... otherwise (kappa in 1/mm,
-/// dl in mm). An empty `coeffs` with `model = "linear"` means the nominal map
+/// `coeffs` are the coefficients in the order the paper's form names them, k0 first (kappa in
+/// 1/mm, dl in mm; the units of each coefficient follow from its basis function). An empty `coeffs` with `model = "linear"` means the nominal map
 /// kappa = dl / (a l_C) of geometry.md.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
