@@ -312,7 +312,8 @@ mod tests {
     fn table_one_forms_on_positive_displacements() {
         // For dl > 0 each family is the paper's form, with ln(1 + dl) for ln(dl).
         let k = [2e-4, 1.1e-3, -3e-5, 4e-6, 7e-6, -2e-6, 1e-6];
-        let forms: [(TendonMapKind, fn(f64, &[f64; 7]) -> f64); 13] = [
+        type Form = fn(f64, &[f64; 7]) -> f64;
+        let forms: [(TendonMapKind, Form); 13] = [
             (TendonMapKind::Linear, |d, k| k[0] * d),
             (TendonMapKind::Affine, |d, k| k[0] + k[1] * d),
             (TendonMapKind::Poly2, |d, k| k[0] + k[1] * d + k[2] * d * d),
