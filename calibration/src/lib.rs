@@ -5,3 +5,7 @@
 //! nothing of the simulated plant, so that it is never tested against its own assumptions.
 
 pub mod lsq;
+pub mod data;
+pub mod step1;
+
+pub use data::{DataError, SplitSource, StaticData, StaticPose};

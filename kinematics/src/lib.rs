@@ -20,6 +20,7 @@ pub use check::{CheckOptions, MotionRejected, Violation};
 pub use fk::FkError;
 pub use ik::{IkError, IkSolution, LegRoot, LegRoots};
 pub use jacobian::Conditioning;
+pub use leg::Leg;
 pub use model::{ModelError, Robot};
 pub use pose::Pose;
 pub use tendon::{TendonMap, TendonMapError};
