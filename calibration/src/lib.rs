@@ -4,8 +4,10 @@
 //! and their reports. The crate reads recordings and robot configurations only: it knows
 //! nothing of the simulated plant, so that it is never tested against its own assumptions.
 
-pub mod lsq;
 pub mod data;
+pub mod lsq;
 pub mod step1;
+pub mod step2;
 
 pub use data::{DataError, SplitSource, StaticData, StaticPose};
+pub mod calibrate;
