@@ -11,3 +11,6 @@ pub mod step2;
 
 pub use data::{DataError, SplitSource, StaticData, StaticPose};
 pub mod calibrate;
+pub mod figures;
+pub mod report;
+pub mod segment;

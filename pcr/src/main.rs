@@ -4,6 +4,8 @@
 
 use clap::{Parser, Subcommand};
 
+mod calibrate;
+mod clock;
 mod csvio;
 mod figures_kin;
 mod figures_plan;
@@ -34,6 +36,9 @@ enum Command {
     Plan(plan::Args),
     /// Static poses and time-stepped runs of the simulated plant.
     Plant(plant::Args),
+    /// Calibrate the robot (Table I maps, two-step parameters) from a recording; `leg` for
+    /// one continuum segment.
+    Calibrate(calibrate::Args),
 }
 
 fn main() -> std::process::ExitCode {
@@ -52,6 +57,7 @@ fn main() -> std::process::ExitCode {
         Command::Profile(a) => profile::run(a),
         Command::Plan(a) => plan::run(a),
         Command::Plant(a) => plant::run(a),
+        Command::Calibrate(a) => calibrate::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

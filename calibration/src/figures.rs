@@ -1,0 +1,322 @@
+//! The calibration report's figures (SVG, plotters, the stack's embedded font).
+
+use pcr_figures::{FONT_FAMILY, LEG_COLOURS, MEASURED, PLANNED};
+use plotters::prelude::*;
+use std::path::Path;
+
+/// Why a figure could not be drawn.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("figure {file}: {message}")]
+pub struct FigureError {
+    /// The file.
+    pub file: String,
+    /// What failed.
+    pub message: String,
+}
+
+fn ferr<E: std::fmt::Debug>(file: &Path) -> impl Fn(E) -> FigureError + '_ {
+    move |e| FigureError {
+        file: file.display().to_string(),
+        message: format!("{e:?}"),
+    }
+}
+
+/// Symmetric-ish bounds of a point set with a margin.
+fn bounds(pts: impl Iterator<Item = (f64, f64)>, margin: f64) -> ([f64; 2], [f64; 2]) {
+    let mut b = [
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    ];
+    for (x, y) in pts {
+        if x.is_finite() && y.is_finite() {
+            b = [b[0].min(x), b[1].max(x), b[2].min(y), b[3].max(y)];
+        }
+    }
+    if !b[0].is_finite() {
+        return ([-1.0, 1.0], [-1.0, 1.0]);
+    }
+    let dx = (b[1] - b[0]).max(1e-9) * margin;
+    let dy = (b[3] - b[2]).max(1e-9) * margin;
+    ([b[0] - dx, b[1] + dx], [b[2] - dy, b[3] + dy])
+}
+
+/// A named group of points in a scatter panel.
+pub struct Group<'a> {
+    /// Legend text.
+    pub label: &'a str,
+    /// Colour.
+    pub colour: RGBColor,
+    /// Filled marker (else hollow).
+    pub filled: bool,
+    /// The points.
+    pub points: Vec<(f64, f64)>,
+}
+
+/// Scatter panels side by side (e.g. Fig. 5: one panel per orientation), equal axes.
+pub fn scatter_panels(
+    file: &Path,
+    title: &str,
+    panels: &[(String, Vec<Group>)],
+    x_desc: &str,
+    y_desc: &str,
+) -> Result<(), FigureError> {
+    pcr_figures::init();
+    let e = ferr(file);
+    let w = 420 * panels.len().max(1) as u32;
+    let root = SVGBackend::new(file, (w, 460)).into_drawing_area();
+    root.fill(&WHITE).map_err(&e)?;
+    let root = root.titled(title, (FONT_FAMILY, 18)).map_err(&e)?;
+    let areas = root.split_evenly((1, panels.len().max(1)));
+    let all = panels
+        .iter()
+        .flat_map(|p| p.1.iter().flat_map(|g| g.points.iter().copied()));
+    let (xr, yr) = bounds(all, 0.08);
+    let half = ((xr[1] - xr[0]).max(yr[1] - yr[0])) / 2.0;
+    let (cx, cy) = ((xr[0] + xr[1]) / 2.0, (yr[0] + yr[1]) / 2.0);
+    for (area, (name, groups)) in areas.iter().zip(panels) {
+        let mut c = ChartBuilder::on(area)
+            .caption(name, (FONT_FAMILY, 15))
+            .margin(10)
+            .x_label_area_size(35)
+            .y_label_area_size(45)
+            .build_cartesian_2d(cx - half..cx + half, cy - half..cy + half)
+            .map_err(&e)?;
+        c.configure_mesh()
+            .x_desc(x_desc)
+            .y_desc(y_desc)
+            .label_style((FONT_FAMILY, 12))
+            .draw()
+            .map_err(&e)?;
+        for g in groups {
+            let style = if g.filled {
+                g.colour.filled()
+            } else {
+                g.colour.stroke_width(1)
+            };
+            c.draw_series(g.points.iter().map(|p| Circle::new(*p, 3, style)))
+                .map_err(&e)?
+                .label(g.label)
+                .legend(move |(x, y)| Circle::new((x + 8, y), 3, style));
+        }
+        c.configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .label_font((FONT_FAMILY, 12))
+            .background_style(WHITE.mix(0.9))
+            .border_style(BLACK)
+            .draw()
+            .map_err(&e)?;
+    }
+    root.present().map_err(&e)?;
+    Ok(())
+}
+
+/// Error vectors at points, before (grey) and after (colour), magnified by `gain`.
+pub fn error_vectors(
+    file: &Path,
+    title: &str,
+    before: &[((f64, f64), (f64, f64))],
+    after: &[((f64, f64), (f64, f64))],
+    gain: f64,
+) -> Result<(), FigureError> {
+    pcr_figures::init();
+    let e = ferr(file);
+    let root = SVGBackend::new(file, (620, 620)).into_drawing_area();
+    root.fill(&WHITE).map_err(&e)?;
+    let pts = before
+        .iter()
+        .chain(after)
+        .flat_map(|(p, d)| [*p, (p.0 + gain * d.0, p.1 + gain * d.1)]);
+    let (xr, yr) = bounds(pts, 0.08);
+    let half = ((xr[1] - xr[0]).max(yr[1] - yr[0])) / 2.0;
+    let (cx, cy) = ((xr[0] + xr[1]) / 2.0, (yr[0] + yr[1]) / 2.0);
+    let mut c = ChartBuilder::on(&root)
+        .caption(title, (FONT_FAMILY, 16))
+        .margin(12)
+        .x_label_area_size(35)
+        .y_label_area_size(45)
+        .build_cartesian_2d(cx - half..cx + half, cy - half..cy + half)
+        .map_err(&e)?;
+    c.configure_mesh()
+        .x_desc("x (mm)")
+        .y_desc("y (mm)")
+        .label_style((FONT_FAMILY, 12))
+        .draw()
+        .map_err(&e)?;
+    for (set, colour, label) in [
+        (before, PLANNED.mix(0.5), format!("before (x{gain:.0})")),
+        (after, MEASURED.mix(1.0), format!("after (x{gain:.0})")),
+    ] {
+        c.draw_series(set.iter().map(|(p, d)| {
+            PathElement::new(
+                vec![*p, (p.0 + gain * d.0, p.1 + gain * d.1)],
+                colour.stroke_width(2),
+            )
+        }))
+        .map_err(&e)?
+        .label(label)
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2)));
+        c.draw_series(set.iter().map(|(p, _)| Circle::new(*p, 2, colour.filled())))
+            .map_err(&e)?;
+    }
+    c.configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .label_font((FONT_FAMILY, 12))
+        .background_style(WHITE.mix(0.9))
+        .border_style(BLACK)
+        .draw()
+        .map_err(&e)?;
+    root.present().map_err(&e)?;
+    Ok(())
+}
+
+/// One panel per leg: measured points and curves of y over x.
+pub struct CurvePanel {
+    /// Panel title.
+    pub title: String,
+    /// Scatter points (measured).
+    pub points: Vec<(f64, f64)>,
+    /// Curves: label, colour index (0..3 leg colours, 3 = grey), points.
+    pub curves: Vec<(String, usize, Vec<(f64, f64)>)>,
+}
+
+/// Panels of curves with data points (e.g. curvature over tendon displacement per leg).
+pub fn curve_panels(
+    file: &Path,
+    title: &str,
+    panels: &[CurvePanel],
+    x_desc: &str,
+    y_desc: &str,
+) -> Result<(), FigureError> {
+    pcr_figures::init();
+    let e = ferr(file);
+    let w = 420 * panels.len().max(1) as u32;
+    let root = SVGBackend::new(file, (w, 420)).into_drawing_area();
+    root.fill(&WHITE).map_err(&e)?;
+    let root = root.titled(title, (FONT_FAMILY, 18)).map_err(&e)?;
+    let areas = root.split_evenly((1, panels.len().max(1)));
+    for (area, p) in areas.iter().zip(panels) {
+        let (xr, yr) = bounds(
+            p.points
+                .iter()
+                .copied()
+                .chain(p.curves.iter().flat_map(|c| c.2.iter().copied())),
+            0.05,
+        );
+        let mut c = ChartBuilder::on(area)
+            .caption(&p.title, (FONT_FAMILY, 15))
+            .margin(10)
+            .x_label_area_size(35)
+            .y_label_area_size(60)
+            .build_cartesian_2d(xr[0]..xr[1], yr[0]..yr[1])
+            .map_err(&e)?;
+        c.configure_mesh()
+            .x_desc(x_desc)
+            .y_desc(y_desc)
+            .label_style((FONT_FAMILY, 12))
+            .draw()
+            .map_err(&e)?;
+        c.draw_series(
+            p.points
+                .iter()
+                .map(|q| Circle::new(*q, 2, MEASURED.filled())),
+        )
+        .map_err(&e)?
+        .label("measured")
+        .legend(|(x, y)| Circle::new((x + 8, y), 3, MEASURED.filled()));
+        for (label, colour, pts) in &p.curves {
+            let col = if *colour < 3 {
+                LEG_COLOURS[*colour]
+            } else {
+                RGBColor(0x88, 0x88, 0x88)
+            };
+            c.draw_series(LineSeries::new(pts.iter().copied(), col.stroke_width(2)))
+                .map_err(&e)?
+                .label(label.as_str())
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], col.stroke_width(2))
+                });
+        }
+        c.configure_series_labels()
+            .position(SeriesLabelPosition::UpperLeft)
+            .label_font((FONT_FAMILY, 12))
+            .background_style(WHITE.mix(0.9))
+            .border_style(BLACK)
+            .draw()
+            .map_err(&e)?;
+    }
+    root.present().map_err(&e)?;
+    Ok(())
+}
+
+/// Horizontal comparison bars: one row per label, several values per row (log scale).
+pub fn bars(
+    file: &Path,
+    title: &str,
+    labels: &[String],
+    series: &[(&str, RGBColor, Vec<Option<f64>>)],
+    x_desc: &str,
+) -> Result<(), FigureError> {
+    pcr_figures::init();
+    let e = ferr(file);
+    let h = 60 + 26 * labels.len() as u32;
+    let root = SVGBackend::new(file, (760, h.max(300))).into_drawing_area();
+    root.fill(&WHITE).map_err(&e)?;
+    let vals = series
+        .iter()
+        .flat_map(|s| s.2.iter().flatten().copied())
+        .filter(|v| *v > 0.0);
+    let (lo, hi) = vals.fold((f64::INFINITY, 0.0f64), |a, v| (a.0.min(v), a.1.max(v)));
+    let (lo, hi) = if lo.is_finite() {
+        (lo / 2.0, hi * 2.0)
+    } else {
+        (0.01, 10.0)
+    };
+    let n = labels.len();
+    let mut c = ChartBuilder::on(&root)
+        .caption(title, (FONT_FAMILY, 16))
+        .margin(12)
+        .x_label_area_size(35)
+        .y_label_area_size(150)
+        .build_cartesian_2d((lo..hi).log_scale(), 0.0..n as f64)
+        .map_err(&e)?;
+    let labels_owned: Vec<String> = labels.to_vec();
+    c.configure_mesh()
+        .x_desc(x_desc)
+        .y_labels(n * 2 + 1)
+        .y_label_formatter(&move |y: &f64| {
+            let k = (y - 0.5).round();
+            if (y - 0.5 - k).abs() < 1e-6 && k >= 0.0 && (k as usize) < n {
+                labels_owned[n - 1 - k as usize].clone()
+            } else {
+                String::new()
+            }
+        })
+        .label_style((FONT_FAMILY, 12))
+        .draw()
+        .map_err(&e)?;
+    let m = series.len().max(1) as f64;
+    for (si, (label, colour, v)) in series.iter().enumerate() {
+        let col = *colour;
+        c.draw_series(v.iter().enumerate().filter_map(|(k, val)| {
+            let val = (*val)?;
+            let row = (n - 1 - k) as f64;
+            let y0 = row + 0.1 + 0.8 * si as f64 / m;
+            let y1 = row + 0.1 + 0.8 * (si + 1) as f64 / m;
+            Some(Rectangle::new([(lo, y0), (val.max(lo), y1)], col.filled()))
+        }))
+        .map_err(&e)?
+        .label(*label)
+        .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 14, y + 5)], col.filled()));
+    }
+    c.configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .label_font((FONT_FAMILY, 12))
+        .background_style(WHITE.mix(0.9))
+        .border_style(BLACK)
+        .draw()
+        .map_err(&e)?;
+    root.present().map_err(&e)?;
+    Ok(())
+}

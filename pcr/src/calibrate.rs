@@ -1,0 +1,261 @@
+//! `pcr calibrate`: the paper's two-step calibration from a recording, and `pcr calibrate leg`
+//! for one continuum segment on its own.
+//!
+//! - `pcr calibrate --robot R --data rec.csv --out calibrated.toml --report DIR --json out.json`
+//! - `pcr calibrate leg --data leg.csv --l-c-mm L [--l-ce-mm E] --json out.json`
+
+use crate::clock::utc_now;
+use anyhow::{bail, Context};
+use pcr_calibration::calibrate::{self, Calibration, Options, ParameterSet};
+use pcr_calibration::report::{opt, write_report};
+use pcr_calibration::segment::{self, SegmentOptions};
+use pcr_calibration::StaticData;
+use pcr_recording::Recording;
+use pcr_robot::{RobotConfig, TendonMapKind};
+use std::path::{Path, PathBuf};
+
+/// Arguments of `pcr calibrate`.
+#[derive(clap::Args)]
+#[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
+pub struct Args {
+    #[command(subcommand)]
+    command: Option<CalibrateCommand>,
+    #[command(flatten)]
+    robot: RobotArgs,
+}
+
+#[derive(clap::Subcommand)]
+enum CalibrateCommand {
+    /// Fit all 13 Table I functions to one continuum segment's measured tip positions.
+    Leg(LegArgs),
+}
+
+/// Which parameters the two steps free.
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum Params {
+    /// Step 1 [l_C, psi, k], step 2 [r_p, theta_p] (the paper).
+    Paper,
+    /// Also the base points B_i (step 1) and the link lengths l_st (step 2).
+    Extended,
+}
+
+#[derive(clap::Args)]
+struct RobotArgs {
+    /// Robot configuration the recording was made with (the start of the fit); default: the
+    /// built-in nominal robot (= configs/robot.toml).
+    #[arg(long, value_name = "ROBOT.toml")]
+    robot: Option<PathBuf>,
+    /// Recording with static poses (settled rows; shared/spec/recording.md).
+    #[arg(long, value_name = "REC.csv", required = true)]
+    data: Option<PathBuf>,
+    /// Calibrated robot configuration to write (same shape as configs/robot.toml).
+    #[arg(long, value_name = "CALIBRATED.toml")]
+    out: Option<PathBuf>,
+    /// Folder for the Markdown report and its figures.
+    #[arg(long, value_name = "DIR")]
+    report: Option<PathBuf>,
+    /// Everything (Table I, parameters with uncertainties, accuracy before and after) as JSON.
+    #[arg(long, value_name = "OUT.json")]
+    json: Option<PathBuf>,
+    /// Parameter set.
+    #[arg(long, value_enum, default_value = "paper")]
+    params: Params,
+    /// Use this Table I function (1..13) instead of selecting by test RMS.
+    #[arg(long, value_parser = clap::value_parser!(u8).range(1..=13))]
+    function: Option<u8>,
+    /// Weight of one degree of orientation error in step 2, mm (default: r_p pi / 180).
+    #[arg(long, value_name = "MM_PER_DEG")]
+    phi_weight: Option<f64>,
+    /// Seed of the random train/test split (recordings without a `set` column).
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+}
+
+#[derive(clap::Args)]
+struct LegArgs {
+    /// CSV with `dl_mm` (or `q1` with --robot), `mx_mm`, `my_mm` in the segment frame and
+    /// optionally `set` (train/test).
+    #[arg(long, value_name = "LEG.csv")]
+    data: PathBuf,
+    /// Segment length l_C, mm.
+    #[arg(long)]
+    l_c_mm: f64,
+    /// Rigid extension from the segment tip to the measured point, mm.
+    #[arg(long, default_value_t = 0.0)]
+    l_ce_mm: f64,
+    /// Robot configuration whose actuation converts `q1` (motor steps) to tendon displacement.
+    #[arg(long, value_name = "ROBOT.toml")]
+    robot: Option<PathBuf>,
+    /// Which leg's actuation of --robot (1..3).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=3))]
+    leg: u8,
+    /// Also fit the base orientation psi (a measurement frame off by a few degrees).
+    #[arg(long)]
+    fit_psi: bool,
+    /// Also fit the segment length.
+    #[arg(long)]
+    fit_l_c: bool,
+    /// Seed of the random 2/3 : 1/3 split by row (files without a `set` column).
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Result as JSON.
+    #[arg(long, value_name = "OUT.json")]
+    json: Option<PathBuf>,
+}
+
+/// Runs `pcr calibrate`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    match args.command {
+        Some(CalibrateCommand::Leg(a)) => run_leg(a),
+        None => run_robot(args.robot),
+    }
+}
+
+/// The robot configuration of `--robot`, or the built-in nominal robot (said on stderr).
+pub fn load_robot(path: Option<&Path>) -> anyhow::Result<RobotConfig> {
+    match path {
+        Some(p) => RobotConfig::load(p).map_err(anyhow::Error::from),
+        None => {
+            eprintln!("robot: the built-in nominal robot (geometry.md; --robot to choose one)");
+            Ok(RobotConfig::nominal())
+        }
+    }
+}
+
+fn write_file(path: &Path, text: &str) -> anyhow::Result<()> {
+    if let Some(d) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(d).with_context(|| format!("cannot create {}", d.display()))?;
+    }
+    std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))
+}
+
+fn run_robot(a: RobotArgs) -> anyhow::Result<()> {
+    let data = a.data.context("--data is required")?;
+    let start = load_robot(a.robot.as_deref())?;
+    let origin = data.display().to_string();
+    let rec = Recording::read_path(&data)?;
+    let opts = Options {
+        parameters: match a.params {
+            Params::Paper => ParameterSet::Paper,
+            Params::Extended => ParameterSet::Extended,
+        },
+        function: a
+            .function
+            .and_then(|f| TendonMapKind::from_table_index(f as usize)),
+        phi_weight_mm_per_deg: a.phi_weight,
+        seed: a.seed,
+        ..Options::default()
+    };
+    if let Some(w) = a.phi_weight {
+        if !(w.is_finite() && w >= 0.0) {
+            bail!("--phi-weight {w}: must be a number of mm per degree >= 0");
+        }
+    }
+    let static_data = StaticData::from_recording(&rec, &origin, opts.seed, opts.test_fraction)?;
+    let cal = calibrate::calibrate_data(&start, &static_data, &opts)?;
+    print_summary(&cal);
+    if let Some(out) = &a.out {
+        write_file(out, &calibrate::robot_file(&cal, &utc_now()))?;
+        println!("calibrated robot: {}", out.display());
+    }
+    if let Some(j) = &a.json {
+        write_file(j, &serde_json::to_string_pretty(&cal)?)?;
+        println!("json: {}", j.display());
+    }
+    if let Some(dir) = &a.report {
+        let p = write_report(dir, &cal, &static_data, &start)?;
+        println!("report: {}", p.display());
+    }
+    Ok(())
+}
+
+fn print_summary(cal: &Calibration) {
+    println!(
+        "{}: {} static poses ({} train, {} test)",
+        cal.data.file, cal.data.poses, cal.data.train, cal.data.test
+    );
+    println!(" #  function      train RMS  test RMS of M_i (mm)");
+    for r in &cal.table1 {
+        println!(
+            "{:2}{} {:12} {:>9} {:>9}{}",
+            r.index,
+            if r.index == cal.selected { '*' } else { ' ' },
+            r.name,
+            opt(r.train_rms_mm, 3),
+            opt(r.test_rms_mm, 3),
+            r.error
+                .as_deref()
+                .map_or(String::new(), |e| format!("  failed: {e}"))
+        );
+    }
+    println!("selected: function {} ({})", cal.selected, cal.selected_by);
+    let line = |label: &str,
+                b: Option<&calibrate::ModelAccuracy>,
+                a: Option<&calibrate::ModelAccuracy>| {
+        if let (Some(b), Some(a)) = (b, a) {
+            println!(
+                "{label}: platform position RMS {:.3} -> {:.3} mm, orientation RMS {:.3} -> {:.3} deg, M_i RMS {:.3} -> {:.3} mm",
+                b.pose.position_rms_mm,
+                a.pose.position_rms_mm,
+                b.pose.orientation_rms_deg,
+                a.pose.orientation_rms_deg,
+                b.m_rms_mm,
+                a.m_rms_mm
+            );
+        }
+    };
+    line("train", Some(&cal.before.train), Some(&cal.after.train));
+    line("test ", cal.before.test.as_ref(), cal.after.test.as_ref());
+    for w in &cal.warnings {
+        eprintln!("warning: {w}");
+    }
+}
+
+fn run_leg(a: LegArgs) -> anyhow::Result<()> {
+    let actuation = match &a.robot {
+        Some(p) => Some(
+            RobotConfig::load(p)?.legs[a.leg as usize - 1]
+                .actuation
+                .clone(),
+        ),
+        None => None,
+    };
+    let points = segment::read_points(&a.data, actuation.as_ref())?;
+    let opts = SegmentOptions {
+        l_c_mm: a.l_c_mm,
+        l_ce_mm: a.l_ce_mm,
+        fit_psi: a.fit_psi,
+        fit_l_c: a.fit_l_c,
+        seed: a.seed,
+        test_fraction: 1.0 / 3.0,
+    };
+    let r = segment::fit_segment(&a.data.display().to_string(), &points, &opts)?;
+    println!(
+        "{}: {} rows ({} train, {} test; split {}), dl from {:.3} to {:.3} mm",
+        r.file, r.points, r.n_train, r.n_test, r.split, r.dl_range_mm[0], r.dl_range_mm[1]
+    );
+    println!(" #  function      train RMS  test RMS (mm)  form");
+    for f in &r.functions {
+        println!(
+            "{:2}{} {:12} {:>9} {:>9}     {}{}",
+            f.index,
+            if Some(f.index) == r.best { '*' } else { ' ' },
+            f.name,
+            opt(f.train_rms_mm, 4),
+            opt(f.test_rms_mm, 4),
+            f.form,
+            f.error
+                .as_deref()
+                .map_or(String::new(), |e| format!("  failed: {e}"))
+        );
+    }
+    match r.best {
+        Some(b) => println!("best: function {b} ({})", r.functions[b - 1].name),
+        None => bail!("{}: no function could be fitted", r.file),
+    }
+    if let Some(j) = &a.json {
+        write_file(j, &serde_json::to_string_pretty(&r)?)?;
+        println!("json: {}", j.display());
+    }
+    Ok(())
+}
