@@ -220,7 +220,9 @@ pub fn pose_observations(data: &StaticData, set: Split) -> Vec<PoseObservation> 
         .collect()
 }
 
-fn accuracy(robot: &RobotConfig, data: &StaticData, set: Split) -> Option<ModelAccuracy> {
+/// The model's accuracy (M_i and platform pose by forward kinematics) on one split of static
+/// poses; `None` when the split has nothing measured or the robot has no home pose.
+pub fn model_accuracy(robot: &RobotConfig, data: &StaticData, set: Split) -> Option<ModelAccuracy> {
     let model = Robot::new(robot).ok()?;
     let (mut ss, mut n, mut mx) = (0.0, 0usize, 0.0f64);
     for i in 0..3 {
@@ -246,12 +248,12 @@ fn accuracy(robot: &RobotConfig, data: &StaticData, set: Split) -> Option<ModelA
 
 fn split_accuracy(robot: &RobotConfig, data: &StaticData) -> SplitAccuracy {
     SplitAccuracy {
-        train: accuracy(robot, data, Split::Train).unwrap_or(ModelAccuracy {
+        train: model_accuracy(robot, data, Split::Train).unwrap_or(ModelAccuracy {
             m_rms_mm: 0.0,
             m_max_mm: 0.0,
             pose: PoseErrors::default(),
         }),
-        test: accuracy(robot, data, Split::Test),
+        test: model_accuracy(robot, data, Split::Test),
     }
 }
 

@@ -10,7 +10,11 @@ pub mod step1;
 pub mod step2;
 
 pub use data::{DataError, SplitSource, StaticData, StaticPose};
+pub mod backlash;
 pub mod calibrate;
+pub mod evaluate;
+pub mod evaluation_report;
 pub mod figures;
 pub mod report;
 pub mod segment;
+pub mod stats;

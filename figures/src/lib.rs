@@ -5,6 +5,9 @@
 //! drawing (it is idempotent).
 
 use plotters::style::{FontStyle, RGBColor};
+
+mod heat_map;
+pub use heat_map::{draw_heat_map, HeatMap};
 use std::sync::Once;
 
 /// The embedded font.

@@ -391,6 +391,13 @@ pub fn alpha_workspace(
 /// step on any combination of motors causes, max over dq in {-1, 0, 1}^3 of |J_q,xy dq|
 /// (the paper's eq. 10 figure of merit). `None` for cells outside the workspace.
 pub fn accuracy_map(robot: &Robot, ws: &Workspace) -> Vec<Option<f64>> {
+    error_map(robot, ws, [1.0; 3])
+}
+
+/// The paper's eq. 10 over a workspace: the largest platform position error (mm) that
+/// undetected motor motions of up to `steps[i]` steps per motor can cause,
+/// max over |dq_i| <= steps_i of |J_q,xy dq|. `None` for cells outside the workspace.
+pub fn error_map(robot: &Robot, ws: &Workspace, steps: [f64; 3]) -> Vec<Option<f64>> {
     let gd = &ws.grid;
     let mut out = vec![None; gd.len()];
     for j in 0..gd.ny {
@@ -400,7 +407,7 @@ pub fn accuracy_map(robot: &Robot, ws: &Workspace) -> Vec<Option<f64>> {
             }
             let c = gd.center(i, j);
             let pose = Pose::new(c[0], c[1], ws.phi);
-            out[j * gd.nx + i] = position_error_per_step(robot, &pose);
+            out[j * gd.nx + i] = position_error_for_steps(robot, &pose, steps);
         }
     }
     out
@@ -408,16 +415,22 @@ pub fn accuracy_map(robot: &Robot, ws: &Workspace) -> Vec<Option<f64>> {
 
 /// The accuracy figure of [`accuracy_map`] at one pose, mm per step.
 pub fn position_error_per_step(robot: &Robot, pose: &Pose) -> Option<f64> {
+    position_error_for_steps(robot, pose, [1.0; 3])
+}
+
+/// The figure of [`error_map`] at one pose, mm.
+pub fn position_error_for_steps(robot: &Robot, pose: &Pose, steps: [f64; 3]) -> Option<f64> {
     let s = robot.ik(pose).ok()?;
     let q: [f64; 3] = std::array::from_fn(|k| robot.kappa_to_steps(k, s.kappa[k]).unwrap_or(0.0));
     let j = robot.jacobian_steps(pose, &s.kappa, &q)?;
-    // The maximum of |J dq| over the cube's vertices equals the max over sign patterns.
+    // |J dq| is convex in dq: its maximum over the box is at a vertex (a sign pattern).
     let mut best = 0.0f64;
     for sx in [-1.0, 1.0] {
         for sy in [-1.0, 1.0] {
             for sz in [-1.0, 1.0] {
-                let dx = j[(0, 0)] * sx + j[(0, 1)] * sy + j[(0, 2)] * sz;
-                let dy = j[(1, 0)] * sx + j[(1, 1)] * sy + j[(1, 2)] * sz;
+                let d = [sx * steps[0], sy * steps[1], sz * steps[2]];
+                let dx = j[(0, 0)] * d[0] + j[(0, 1)] * d[1] + j[(0, 2)] * d[2];
+                let dy = j[(1, 0)] * d[0] + j[(1, 1)] * d[1] + j[(1, 2)] * d[2];
                 best = best.max(dx.hypot(dy));
             }
         }

@@ -170,88 +170,37 @@ pub fn workspace_svg(
 }
 
 /// Heat map of the accuracy figure (mm of platform motion per motor step).
-pub fn accuracy_svg(path: &str, robot: &Robot, ws: &Workspace, acc: &[Option<f64>]) -> Result<()> {
-    pcr_figures::init();
+pub fn accuracy_svg(path: &str, ws: &Workspace, acc: &[Option<f64>]) -> Result<()> {
     let g = &ws.grid;
-    let Some(b) = ws.bounds() else {
+    if ws.bounds().is_none() {
         return Err(anyhow!("the workspace is empty: no accuracy map to draw"));
-    };
-    let vals: Vec<f64> = acc.iter().flatten().copied().collect();
-    let (lo, hi) = (
-        vals.iter().copied().fold(f64::INFINITY, f64::min),
-        vals.iter().copied().fold(0.0, f64::max),
-    );
-    let root = SVGBackend::new(path, (900, 820)).into_drawing_area();
-    root.fill(&WHITE).map_err(err)?;
-    let (main, bar) = root.split_horizontally(770);
-    let mut chart = ChartBuilder::on(&main)
-        .caption(
-            format!(
-                "Platform motion per motor step (mm), phi = {:.1} deg",
-                ws.phi.to_degrees()
-            ),
-            (FONT_FAMILY, 20),
-        )
-        .margin(15)
-        .x_label_area_size(40)
-        .y_label_area_size(50)
-        .build_cartesian_2d(b[0] - 5.0..b[1] + 5.0, b[2] - 5.0..b[3] + 5.0)
-        .map_err(err)?;
-    chart
-        .configure_mesh()
-        .x_desc("x (mm)")
-        .y_desc("y (mm)")
-        .label_style((FONT_FAMILY, 13))
-        .draw()
-        .map_err(err)?;
+    }
     // At most ~70 x 70 rectangles: sample every `stride` cells.
     let stride = (g.nx.max(g.ny) / 70).max(1);
-    let s = g.res * stride as f64;
-    let mut rects = Vec::new();
+    let mut cells = Vec::new();
     for j in (0..g.ny).step_by(stride) {
         for i in (0..g.nx).step_by(stride) {
             if let Some(v) = acc[j * g.nx + i] {
-                let c = g.center(i, j);
-                let t = if hi > lo { (v - lo) / (hi - lo) } else { 0.5 };
-                rects.push(Rectangle::new(
-                    [
-                        (c[0] - s / 2.0, c[1] - s / 2.0),
-                        (c[0] + s / 2.0, c[1] + s / 2.0),
-                    ],
-                    colour_map(t).filled(),
-                ));
+                cells.push((g.center(i, j), v));
             }
         }
     }
-    chart.draw_series(rects).map_err(err)?;
-    segments(&mut chart, &ws.contour(), BLACK.stroke_width(1))?;
-    let _ = robot;
-    // Colour bar.
-    let mut cb = ChartBuilder::on(&bar)
-        .margin_top(60)
-        .margin_bottom(55)
-        .margin_right(40)
-        .y_label_area_size(70)
-        .build_cartesian_2d(0.0..1.0, lo..hi.max(lo + 1e-9))
-        .map_err(err)?;
-    cb.configure_mesh()
-        .disable_x_mesh()
-        .disable_x_axis()
-        .label_style((FONT_FAMILY, 12))
-        .draw()
-        .map_err(err)?;
-    let n = 100;
-    cb.draw_series((0..n).map(|k| {
-        let a = lo + (hi - lo) * k as f64 / n as f64;
-        let bb = lo + (hi - lo) * (k + 1) as f64 / n as f64;
-        Rectangle::new(
-            [(0.0, a), (1.0, bb)],
-            colour_map(k as f64 / n as f64).filled(),
-        )
-    }))
-    .map_err(err)?;
-    root.present().map_err(err)?;
-    Ok(())
+    let title = format!(
+        "Platform motion per motor step (mm), phi = {:.1} deg",
+        ws.phi.to_degrees()
+    );
+    pcr_figures::draw_heat_map(
+        std::path::Path::new(path),
+        &pcr_figures::HeatMap {
+            title: &title,
+            cells: &cells,
+            cell_mm: g.res * stride as f64,
+            outline: &ws.contour(),
+            marks: &[],
+            value_label: "mm per step",
+        },
+    )
+    .map_err(|e| anyhow!(e))
 }
 
 /// The base-radius sweep: area over radius, and the contours of every radius.

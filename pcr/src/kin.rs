@@ -373,7 +373,7 @@ pub fn run_workspace(a: WorkspaceArgs) -> Result<()> {
                 serde_json::json!({"min": min, "mean": mean, "max": max});
             println!("accuracy: platform motion per motor step min {min:.4} mean {mean:.4} max {max:.4} mm");
         }
-        figures_kin::accuracy_svg(path, &robot, main, &acc)?;
+        figures_kin::accuracy_svg(path, main, &acc)?;
     }
     if let Some(path) = &c.svg {
         figures_kin::workspace_svg(path, &robot, grid.as_ref(), alpha.as_ref())?;

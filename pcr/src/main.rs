@@ -7,6 +7,7 @@ use clap::{Parser, Subcommand};
 mod calibrate;
 mod clock;
 mod csvio;
+mod evaluate;
 mod figures_kin;
 mod figures_plan;
 mod kin;
@@ -39,6 +40,9 @@ enum Command {
     /// Calibrate the robot (Table I maps, two-step parameters) from a recording; `leg` for
     /// one continuum segment.
     Calibrate(calibrate::Args),
+    /// Evaluate recordings: ISO 9283 repeatability and pose accuracy, path accuracy (Table II),
+    /// gear backlash and the eq. 10 error map.
+    Evaluate(evaluate::Args),
 }
 
 fn main() -> std::process::ExitCode {
@@ -58,6 +62,7 @@ fn main() -> std::process::ExitCode {
         Command::Plan(a) => plan::run(a),
         Command::Plant(a) => plant::run(a),
         Command::Calibrate(a) => calibrate::run(a),
+        Command::Evaluate(a) => evaluate::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
