@@ -361,7 +361,20 @@ pub fn calibrate_data(
             if let Some(e) = &row.error {
                 return Err(CalibError::NoFunction {
                     origin,
-                    reasons: format!("function {} ({}): {e}", row.index, row.name),
+                    reasons: format!("  {e}"),
+                });
+            }
+            if let Some(f) = row.legs.iter().find(|f| !f.converged) {
+                return Err(CalibError::NoFunction {
+                    origin,
+                    reasons: format!(
+                        "  leg {}: function {} ({}): the fit did not converge ({} after {} evaluations)",
+                        f.leg.map_or(0, |i| i + 1),
+                        row.index,
+                        row.name,
+                        f.status,
+                        f.evaluations
+                    ),
                 });
             }
             (k.table_index(), "forced by the user".to_string())
@@ -395,13 +408,12 @@ pub fn calibrate_data(
                 None => {
                     let reasons = table1
                         .iter()
-                        .map(|r| {
-                            format!(
-                                "  function {} ({}): {}",
-                                r.index,
-                                r.name,
-                                r.error.as_deref().unwrap_or("did not converge")
-                            )
+                        .map(|r| match &r.error {
+                            Some(e) => format!("  {e}"),
+                            None => format!(
+                                "  function {} ({}): the fit did not converge",
+                                r.index, r.name
+                            ),
                         })
                         .collect::<Vec<_>>()
                         .join("\n");
