@@ -1,5 +1,6 @@
 //! The robot configuration file (`configs/robot.toml`): loading and validation.
 
+use crate::effects::Effects;
 use crate::tendon_map::{TendonMapKind, TendonMapSpec};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -224,6 +225,9 @@ pub struct RobotConfig {
     pub limits: Limits,
     /// The three legs in order i = 1, 2, 3.
     pub legs: Vec<LegConfig>,
+    /// Effects beyond the constant-curvature model (found by `pcr residuals`); none by default.
+    #[serde(default, skip_serializing_if = "Effects::is_empty")]
+    pub effects: Effects,
 }
 
 mod mode_serde {
@@ -252,6 +256,7 @@ impl RobotConfig {
             working_mode: [WorkingMode::Negative; 3],
             limits: Limits::default(),
             legs: (0..3).map(LegConfig::nominal).collect(),
+            effects: Effects::default(),
         }
     }
 
@@ -411,6 +416,9 @@ impl RobotConfig {
             if let Some(c) = tm.coeffs.iter().find(|c| !c.is_finite()) {
                 return Err(bad(k("tendon_map.coeffs"), c.to_string(), "must be finite"));
             }
+        }
+        if let Err((key, value, reason)) = self.effects.check() {
+            return Err(bad(key, value, &reason));
         }
         Ok(())
     }

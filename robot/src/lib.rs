@@ -9,9 +9,11 @@
 //! Units follow geometry.md: millimetres and degrees in files, millimetres and radians in code.
 
 pub mod config;
+pub mod effects;
 pub mod geometry;
 pub mod tendon_map;
 
 pub use config::{Actuation, ConfigError, LegConfig, Limits, RobotConfig, WorkingMode};
+pub use effects::Effects;
 pub use geometry::{rot, Vec2};
 pub use tendon_map::{TendonMapKind, TendonMapSpec};

@@ -1,0 +1,216 @@
+//! Effects beyond the constant-curvature model that a robot file may declare (`[effects]`),
+//! found by `pcr residuals` from measured data and used by the running system: the model (FK,
+//! IK) and the drive compensate them.
+//!
+//! Every effect is optional; a robot file without `[effects]` is the plain calibrated model.
+//! Geometry and tendon-map corrections need no entry here: they are written into the legs.
+//! Units as in the rest of the file: mm, degrees, motor steps, seconds, N.
+
+use serde::{Deserialize, Serialize};
+
+/// Command-to-motion latency: the measured motion lags the command by `latency_s`. The chain
+/// feeds it forward (the interpolator commands the pose of `t + latency_s`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Latency {
+    /// Latency, s.
+    pub latency_s: f64,
+}
+
+/// Gear backlash (or friction hysteresis acting like it): the tendon roll follows the motor
+/// only after the play of `steps` is taken up on a reversal. The drive compensates by adding
+/// the play in the direction of motion.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Backlash {
+    /// Play per motor, steps.
+    pub steps: [f64; 3],
+}
+
+/// Slow drift: tendon creep. The effective tendon displacement is dl - e with
+/// de/dt = (gain * dl_load - e) / time_constant, `dl_load` the displacement that loads the tendon
+/// (the bending moment is proportional to the curvature, so the load is taken as proportional
+/// to the commanded dl). The IK adds the predicted elongation to the command.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Creep {
+    /// Final elongation per mm of commanded displacement, per leg (dimensionless).
+    pub gain: [f64; 3],
+    /// Time constant, s.
+    pub time_constant_s: f64,
+}
+
+/// Compliance: a kineto-static extension of the constant-curvature model (segments that bend
+/// under the link forces, with their total bending fixed by the tendons), loaded by an external
+/// wrench on the platform and by springs in the passive joints relaxed at the home pose.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Compliance {
+    /// Bending stiffness of each segment, N mm^2.
+    pub ei_n_mm2: f64,
+    /// External force on the platform centre, base frame, N.
+    #[serde(default)]
+    pub force_n: [f64; 2],
+    /// External couple on the platform, N mm.
+    #[serde(default)]
+    pub couple_n_mm: f64,
+    /// Spring of the passive joints at M_i, N mm/rad.
+    #[serde(default)]
+    pub k_m_n_mm_per_rad: f64,
+    /// Spring of the passive joints at P_i, N mm/rad.
+    #[serde(default)]
+    pub k_p_n_mm_per_rad: f64,
+}
+
+/// Capture-frame correction: a measured pose p (robot frame as registered) is corrected to
+/// R(dphi) p + d. The pose sensor applies it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FrameCorrection {
+    /// Offset x, mm.
+    pub dx_mm: f64,
+    /// Offset y, mm.
+    pub dy_mm: f64,
+    /// Rotation, degrees.
+    pub dphi_deg: f64,
+}
+
+/// One periodic transmission error: the output of motor `motor` lags its position by
+/// `amplitude_steps sin(2 pi q / period_steps + phase)`. The drive subtracts it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Periodic {
+    /// Motor 1..3.
+    pub motor: u8,
+    /// Period, motor steps.
+    pub period_steps: f64,
+    /// Amplitude, steps.
+    pub amplitude_steps: f64,
+    /// Phase, degrees.
+    pub phase_deg: f64,
+}
+
+/// Every effect a robot file can declare.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Effects {
+    /// Command-to-motion latency.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub latency: Option<Latency>,
+    /// Gear backlash.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub backlash: Option<Backlash>,
+    /// Tendon creep.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub creep: Option<Creep>,
+    /// Kineto-static compliance.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub compliance: Option<Compliance>,
+    /// Capture-frame correction.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frame: Option<FrameCorrection>,
+    /// Periodic transmission errors.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub periodic: Vec<Periodic>,
+}
+
+impl Effects {
+    /// Whether no effect is declared.
+    pub fn is_empty(&self) -> bool {
+        *self == Effects::default()
+    }
+
+    /// Checks ranges; returns the dotted key and the reason of the first problem.
+    pub fn check(&self) -> Result<(), (String, String, String)> {
+        let bad = |k: &str, v: String, why: &str| Err((format!("effects.{k}"), v, why.to_string()));
+        if let Some(l) = &self.latency {
+            if !(l.latency_s.is_finite() && l.latency_s.abs() <= 1.0) {
+                return bad("latency.latency_s", l.latency_s.to_string(), "must be within +-1 s");
+            }
+        }
+        if let Some(b) = &self.backlash {
+            if let Some(v) = b.steps.iter().find(|v| !(v.is_finite() && **v >= 0.0 && **v <= 1e3)) {
+                return bad("backlash.steps", v.to_string(), "must be in [0, 1000] steps");
+            }
+        }
+        if let Some(c) = &self.creep {
+            if !(c.time_constant_s.is_finite() && c.time_constant_s > 0.0) {
+                return bad(
+                    "creep.time_constant_s",
+                    c.time_constant_s.to_string(),
+                    "must be > 0 s",
+                );
+            }
+            if let Some(v) = c.gain.iter().find(|v| !(v.is_finite() && v.abs() < 1.0)) {
+                return bad("creep.gain", v.to_string(), "must be within (-1, 1)");
+            }
+        }
+        if let Some(c) = &self.compliance {
+            if !(c.ei_n_mm2.is_finite() && c.ei_n_mm2 > 0.0) {
+                return bad("compliance.ei_n_mm2", c.ei_n_mm2.to_string(), "must be > 0");
+            }
+            for (k, v) in [
+                ("force_n", c.force_n[0]),
+                ("force_n", c.force_n[1]),
+                ("couple_n_mm", c.couple_n_mm),
+                ("k_m_n_mm_per_rad", c.k_m_n_mm_per_rad),
+                ("k_p_n_mm_per_rad", c.k_p_n_mm_per_rad),
+            ] {
+                if !v.is_finite() {
+                    return bad(&format!("compliance.{k}"), v.to_string(), "must be finite");
+                }
+            }
+        }
+        if let Some(f) = &self.frame {
+            for (k, v) in [("dx_mm", f.dx_mm), ("dy_mm", f.dy_mm), ("dphi_deg", f.dphi_deg)] {
+                if !v.is_finite() {
+                    return bad(&format!("frame.{k}"), v.to_string(), "must be finite");
+                }
+            }
+        }
+        for (i, p) in self.periodic.iter().enumerate() {
+            let k = |n: &str| format!("periodic[{}].{n}", i + 1);
+            if !(1..=3).contains(&p.motor) {
+                return bad(&k("motor"), p.motor.to_string(), "must be 1, 2 or 3");
+            }
+            if !(p.period_steps.is_finite() && p.period_steps >= 2.0) {
+                return bad(&k("period_steps"), p.period_steps.to_string(), "must be >= 2 steps");
+            }
+            if !(p.amplitude_steps.is_finite() && p.phase_deg.is_finite()) {
+                return bad(&k("amplitude_steps"), p.amplitude_steps.to_string(), "must be finite");
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::RobotConfig;
+
+    #[test]
+    fn effects_round_trip_and_bad_values_name_the_key() {
+        let mut r = RobotConfig::nominal();
+        let text = r.to_toml_string();
+        assert!(!text.contains("effects"), "no effects section when there are none");
+        r.effects.backlash = Some(super::Backlash {
+            steps: [3.0, 4.0, 3.0],
+        });
+        r.effects.latency = Some(super::Latency { latency_s: 0.05 });
+        r.effects.periodic.push(super::Periodic {
+            motor: 2,
+            period_steps: 32.0,
+            amplitude_steps: 0.4,
+            phase_deg: 30.0,
+        });
+        let text = r.to_toml_string();
+        let back = RobotConfig::from_toml_str(&text, "x.toml").unwrap();
+        assert_eq!(back, r);
+        let bad = text.replace("latency_s = 0.05", "latency_s = 5.0");
+        let e = RobotConfig::from_toml_str(&bad, "x.toml").unwrap_err().to_string();
+        assert!(e.contains("effects.latency.latency_s") && e.contains("x.toml"), "{e}");
+        let bad = text.replace("motor = 2", "motor = 4");
+        let e = RobotConfig::from_toml_str(&bad, "x.toml").unwrap_err().to_string();
+        assert!(e.contains("periodic[1].motor"), "{e}");
+    }
+}
