@@ -13,6 +13,7 @@ pub mod jacobian;
 pub mod leg;
 pub mod model;
 pub mod pose;
+pub mod statics;
 pub mod tendon;
 pub mod workspace;
 

@@ -52,7 +52,9 @@ fn recording(truth: &RobotConfig, n: usize) -> String {
         let phi = [0.0, 8.0, -8.0][k % 3];
         k += 1;
         let target = Pose::from_mm_deg(r * a.cos(), r * a.sin(), phi);
-        let Ok(sol) = nominal.ik(&target) else { continue };
+        let Ok(sol) = nominal.ik(&target) else {
+            continue;
+        };
         let q: [f64; 3] =
             std::array::from_fn(|i| nominal.kappa_to_steps(i, sol.kappa[i]).unwrap().round());
         let kappa: [f64; 3] = std::array::from_fn(|i| tr.steps_to_kappa(i, q[i]));
@@ -82,7 +84,10 @@ fn recording(truth: &RobotConfig, n: usize) -> String {
             );
         }
         t += 0.02;
-        s += &format!("{t:.2},{},{},{},,,,,,,,,,,,,{id},0,{set}\n", q[0], q[1], q[2]);
+        s += &format!(
+            "{t:.2},{},{},{},,,,,,,,,,,,,{id},0,{set}\n",
+            q[0], q[1], q[2]
+        );
         id += 1;
     }
     s
@@ -125,17 +130,39 @@ fn calibrate_writes_a_robot_that_loads_json_and_report() {
     let kt: [f64; 3] = std::array::from_fn(|i| truth.steps_to_kappa(i, q[i]));
     let reached = truth.fk(&kt).unwrap();
     assert!(reached.position_distance(&pose) < 0.05, "{reached:?}");
-    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     assert_eq!(v["table1"].as_array().unwrap().len(), 13);
     assert_eq!(v["table1"][12]["form"], "k0 + k1 dl + k2 dl^2 + k3 ln(dl)");
-    assert!(v["after"]["test"]["pose"]["position_rms_mm"].as_f64().unwrap() < 0.05);
+    assert!(
+        v["after"]["test"]["pose"]["position_rms_mm"]
+            .as_f64()
+            .unwrap()
+            < 0.05
+    );
     assert!(v["step1"][0]["params"][0]["std"].as_f64().unwrap() > 0.0);
-    for f in ["report.md", "table1.svg", "poses.svg", "maps.svg", "errors.svg"] {
+    for f in [
+        "report.md",
+        "table1.svg",
+        "poses.svg",
+        "maps.svg",
+        "errors.svg",
+    ] {
         assert!(report.join(f).exists(), "{f}");
     }
     // The calibrated file drives the other tools unchanged.
-    let o = pcr(&["fk", "--robot", out.to_str().unwrap(), "--input", "/dev/null"]);
-    assert!(!stderr(&o).contains("robot configuration"), "{}", stderr(&o));
+    let o = pcr(&[
+        "fk",
+        "--robot",
+        out.to_str().unwrap(),
+        "--input",
+        "/dev/null",
+    ]);
+    assert!(
+        !stderr(&o).contains("robot configuration"),
+        "{}",
+        stderr(&o)
+    );
 }
 
 #[test]
@@ -185,7 +212,9 @@ fn calibrate_refuses_bad_recordings_with_clear_errors() {
     let e = run("no_m2.csv", &no_m2);
     assert!(e.contains("M2") && e.contains("m2x_mm"), "{e}");
     // No settled rows.
-    let unsettled = good.replace(",1,train\n", ",0,train\n").replace(",1,test\n", ",0,test\n");
+    let unsettled = good
+        .replace(",1,train\n", ",0,train\n")
+        .replace(",1,test\n", ",0,test\n");
     let e = run("unsettled.csv", &unsettled);
     assert!(e.contains("settled"), "{e}");
     // Time going backwards.
@@ -194,10 +223,17 @@ fn calibrate_refuses_bad_recordings_with_clear_errors() {
     let e = run("backwards.csv", &(lines.join("\n") + "\n"));
     assert!(e.contains("backwards.csv") && e.contains("line"), "{e}");
     // Too few poses for the parameters.
-    let few: String = good.lines().take(2 + 4 * 3).map(|l| format!("{l}\n")).collect();
+    let few: String = good
+        .lines()
+        .take(2 + 4 * 3)
+        .map(|l| format!("{l}\n"))
+        .collect();
     let e = run("few.csv", &few);
     assert!(e.contains("few.csv"), "{e}");
-    assert!(e.contains("training points") || e.contains("training poses"), "{e}");
+    assert!(
+        e.contains("training points") || e.contains("training poses"),
+        "{e}"
+    );
     // A bad number names line and column.
     let bad = good.replacen(",1,train\n", ",yes,train\n", 1);
     let e = run("bad.csv", &bad);
@@ -234,7 +270,8 @@ fn calibrate_leg_fits_a_segment_file() {
         json.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     let f = v["functions"].as_array().unwrap();
     assert_eq!(f.len(), 13);
     assert_eq!(f[4]["index"], 5);
@@ -244,11 +281,33 @@ fn calibrate_leg_fits_a_segment_file() {
     assert_eq!(v["n_test"], 13);
     // q1 without --robot, and a missing column, are refused by name.
     let p = write(d.path(), "q.csv", "q1,mx_mm,my_mm\n1,2,3\n");
-    let o = pcr(&["calibrate", "leg", "--data", p.to_str().unwrap(), "--l-c-mm", "110"]);
-    assert!(!o.status.success() && stderr(&o).contains("--robot"), "{}", stderr(&o));
+    let o = pcr(&[
+        "calibrate",
+        "leg",
+        "--data",
+        p.to_str().unwrap(),
+        "--l-c-mm",
+        "110",
+    ]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("--robot"),
+        "{}",
+        stderr(&o)
+    );
     let p = write(d.path(), "m.csv", "dl_mm,mx_mm\n1,2\n");
-    let o = pcr(&["calibrate", "leg", "--data", p.to_str().unwrap(), "--l-c-mm", "110"]);
-    assert!(!o.status.success() && stderr(&o).contains("my_mm"), "{}", stderr(&o));
+    let o = pcr(&[
+        "calibrate",
+        "leg",
+        "--data",
+        p.to_str().unwrap(),
+        "--l-c-mm",
+        "110",
+    ]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("my_mm"),
+        "{}",
+        stderr(&o)
+    );
 }
 
 #[test]
@@ -269,8 +328,12 @@ fn evaluate_prints_table_two_and_writes_json() {
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let out = String::from_utf8_lossy(&o.stdout);
-    assert!(out.contains("pose uncalibrated") && out.contains("mean dr (mm)"), "{out}");
-    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert!(
+        out.contains("pose uncalibrated") && out.contains("mean dr (mm)"),
+        "{out}"
+    );
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     let p = &v["evaluations"][0]["pose_accuracy"];
     assert_eq!(p["poses"], 12);
     assert!(p["position_mm"]["mean"].as_f64().unwrap() > 0.1);

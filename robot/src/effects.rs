@@ -125,12 +125,24 @@ impl Effects {
         let bad = |k: &str, v: String, why: &str| Err((format!("effects.{k}"), v, why.to_string()));
         if let Some(l) = &self.latency {
             if !(l.latency_s.is_finite() && l.latency_s.abs() <= 1.0) {
-                return bad("latency.latency_s", l.latency_s.to_string(), "must be within +-1 s");
+                return bad(
+                    "latency.latency_s",
+                    l.latency_s.to_string(),
+                    "must be within +-1 s",
+                );
             }
         }
         if let Some(b) = &self.backlash {
-            if let Some(v) = b.steps.iter().find(|v| !(v.is_finite() && **v >= 0.0 && **v <= 1e3)) {
-                return bad("backlash.steps", v.to_string(), "must be in [0, 1000] steps");
+            if let Some(v) = b
+                .steps
+                .iter()
+                .find(|v| !(v.is_finite() && **v >= 0.0 && **v <= 1e3))
+            {
+                return bad(
+                    "backlash.steps",
+                    v.to_string(),
+                    "must be in [0, 1000] steps",
+                );
             }
         }
         if let Some(c) = &self.creep {
@@ -162,7 +174,11 @@ impl Effects {
             }
         }
         if let Some(f) = &self.frame {
-            for (k, v) in [("dx_mm", f.dx_mm), ("dy_mm", f.dy_mm), ("dphi_deg", f.dphi_deg)] {
+            for (k, v) in [
+                ("dx_mm", f.dx_mm),
+                ("dy_mm", f.dy_mm),
+                ("dphi_deg", f.dphi_deg),
+            ] {
                 if !v.is_finite() {
                     return bad(&format!("frame.{k}"), v.to_string(), "must be finite");
                 }
@@ -174,10 +190,18 @@ impl Effects {
                 return bad(&k("motor"), p.motor.to_string(), "must be 1, 2 or 3");
             }
             if !(p.period_steps.is_finite() && p.period_steps >= 2.0) {
-                return bad(&k("period_steps"), p.period_steps.to_string(), "must be >= 2 steps");
+                return bad(
+                    &k("period_steps"),
+                    p.period_steps.to_string(),
+                    "must be >= 2 steps",
+                );
             }
             if !(p.amplitude_steps.is_finite() && p.phase_deg.is_finite()) {
-                return bad(&k("amplitude_steps"), p.amplitude_steps.to_string(), "must be finite");
+                return bad(
+                    &k("amplitude_steps"),
+                    p.amplitude_steps.to_string(),
+                    "must be finite",
+                );
             }
         }
         Ok(())
@@ -192,7 +216,10 @@ mod tests {
     fn effects_round_trip_and_bad_values_name_the_key() {
         let mut r = RobotConfig::nominal();
         let text = r.to_toml_string();
-        assert!(!text.contains("effects"), "no effects section when there are none");
+        assert!(
+            !text.contains("effects"),
+            "no effects section when there are none"
+        );
         r.effects.backlash = Some(super::Backlash {
             steps: [3.0, 4.0, 3.0],
         });
@@ -207,10 +234,17 @@ mod tests {
         let back = RobotConfig::from_toml_str(&text, "x.toml").unwrap();
         assert_eq!(back, r);
         let bad = text.replace("latency_s = 0.05", "latency_s = 5.0");
-        let e = RobotConfig::from_toml_str(&bad, "x.toml").unwrap_err().to_string();
-        assert!(e.contains("effects.latency.latency_s") && e.contains("x.toml"), "{e}");
+        let e = RobotConfig::from_toml_str(&bad, "x.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("effects.latency.latency_s") && e.contains("x.toml"),
+            "{e}"
+        );
         let bad = text.replace("motor = 2", "motor = 4");
-        let e = RobotConfig::from_toml_str(&bad, "x.toml").unwrap_err().to_string();
+        let e = RobotConfig::from_toml_str(&bad, "x.toml")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("periodic[1].motor"), "{e}");
     }
 }
