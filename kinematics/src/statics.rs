@@ -80,6 +80,15 @@ pub struct Equilibrium {
 }
 
 type V12 = SVector<f64, 12>;
+
+/// What the loaded equilibrium of given curvatures keeps fixed: the unloaded joints and tip
+/// tangents, the tip compliances and the springs' rest angles.
+struct LoadedSetup {
+    m0: [Vec2; 3],
+    t: [Vec2; 3],
+    c: [[[f64; 2]; 2]; 3],
+    rest: [(f64, f64); 3],
+}
 type M12 = SMatrix<f64, 12, 12>;
 
 impl Robot {
@@ -154,42 +163,8 @@ impl Robot {
         if loads.is_unloaded() {
             return Ok(self.equilibrium_of(&rigid, &m0, &t, [0.0; 3]));
         }
-        let c: [[[f64; 2]; 2]; 3] =
-            std::array::from_fn(|i| self.tip_compliance(i, kappa[i], loads.ei));
-        let rest = self.home_joint_angles();
-        let r = self.r_char;
-        let residual = |z: &V12| -> V12 {
-            let pose = Pose::new(z[0], z[1], z[2]);
-            let mut out = V12::zeros();
-            let mut sum_f = [loads.force[0], loads.force[1]];
-            let mut sum_m = loads.couple;
-            for i in 0..3 {
-                let m = [m0[i][0] + z[6 + 2 * i], m0[i][1] + z[7 + 2 * i]];
-                let p = self.joint_p(i, &pose);
-                let d = g::sub(p, m);
-                let l = self.legs[i].l_st;
-                out[i] = (g::dot(d, d) - l * l) / (2.0 * l);
-                let u = g::scale(1.0 / g::norm(d).max(1e-9), d);
-                let gamma = g::signed_angle(t[i], d);
-                let pe = g::sub(p, [pose.x, pose.y]);
-                let zeta = g::signed_angle(pe, g::sub(m, p));
-                let tau = -loads.k_m * (gamma - rest[i].0) - loads.k_p * (zeta - rest[i].1);
-                let f = g::add(g::scale(z[3 + i], u), g::scale(tau / l, g::perp(u)));
-                sum_f = g::add(sum_f, f);
-                sum_m += g::cross(pe, f) + loads.k_p * (zeta - rest[i].1);
-                // Compliance: the tip carries -f.
-                let dm = [
-                    -(c[i][0][0] * f[0] + c[i][0][1] * f[1]),
-                    -(c[i][1][0] * f[0] + c[i][1][1] * f[1]),
-                ];
-                out[6 + 2 * i] = z[6 + 2 * i] - dm[0];
-                out[7 + 2 * i] = z[7 + 2 * i] - dm[1];
-            }
-            out[3] = sum_f[0];
-            out[4] = sum_f[1];
-            out[5] = sum_m / r;
-            out
-        };
+        let setup = self.loaded_setup(kappa, loads.ei);
+        let residual = |z: &V12| self.loaded_residual(&setup, loads, z);
         let mut z = V12::zeros();
         z[0] = rigid.x;
         z[1] = rigid.y;
@@ -223,6 +198,98 @@ impl Robot {
         let m: [Vec2; 3] =
             std::array::from_fn(|i| [m0[i][0] + z[6 + 2 * i], m0[i][1] + z[7 + 2 * i]]);
         Ok(self.equilibrium_of(&pose, &m, &t, [z[3], z[4], z[5]]))
+    }
+
+    fn loaded_setup(&self, kappa: &[f64; 3], ei: f64) -> LoadedSetup {
+        LoadedSetup {
+            m0: std::array::from_fn(|i| self.joint_m(i, kappa[i])),
+            t: std::array::from_fn(|i| self.legs[i].tangent(kappa[i])),
+            c: std::array::from_fn(|i| self.tip_compliance(i, kappa[i], ei)),
+            rest: self.home_joint_angles(),
+        }
+    }
+
+    /// Residual of the loaded equilibrium: loop closures (mm), platform forces (N) and moment
+    /// (N, divided by the characteristic radius), compliance relations (mm).
+    fn loaded_residual(&self, st: &LoadedSetup, loads: &Loads, z: &V12) -> V12 {
+        let pose = Pose::new(z[0], z[1], z[2]);
+        let mut out = V12::zeros();
+        let mut sum_f = [loads.force[0], loads.force[1]];
+        let mut sum_m = loads.couple;
+        for i in 0..3 {
+            let m = [st.m0[i][0] + z[6 + 2 * i], st.m0[i][1] + z[7 + 2 * i]];
+            let p = self.joint_p(i, &pose);
+            let d = g::sub(p, m);
+            let l = self.legs[i].l_st;
+            out[i] = (g::dot(d, d) - l * l) / (2.0 * l);
+            let u = g::scale(1.0 / g::norm(d).max(1e-9), d);
+            let gamma = g::signed_angle(st.t[i], d);
+            let pe = g::sub(p, [pose.x, pose.y]);
+            let zeta = g::signed_angle(pe, g::sub(m, p));
+            let tau = -loads.k_m * (gamma - st.rest[i].0) - loads.k_p * (zeta - st.rest[i].1);
+            let f = g::add(g::scale(z[3 + i], u), g::scale(tau / l, g::perp(u)));
+            sum_f = g::add(sum_f, f);
+            sum_m += g::cross(pe, f) + loads.k_p * (zeta - st.rest[i].1);
+            // Compliance: the tip carries -f.
+            let c = &st.c[i];
+            out[6 + 2 * i] = z[6 + 2 * i] + (c[0][0] * f[0] + c[0][1] * f[1]);
+            out[7 + 2 * i] = z[7 + 2 * i] + (c[1][0] * f[0] + c[1][1] * f[1]);
+        }
+        out[3] = sum_f[0];
+        out[4] = sum_f[1];
+        out[5] = sum_m / self.r_char;
+        out
+    }
+
+    /// The first-order response of the platform pose to the five load parameters (force x, y in
+    /// N, couple in N mm, k_M and k_P in N mm/rad) at the equilibrium of `loads`: columns of
+    /// d(x mm, y mm, phi rad)/d(parameter). `guess` starts the equilibrium.
+    pub fn load_response(
+        &self,
+        kappa: &[f64; 3],
+        loads: &Loads,
+        guess: &Pose,
+    ) -> Result<[[f64; 3]; 5], FkError> {
+        let eq = self.fk_loaded(kappa, loads, guess)?;
+        let st = self.loaded_setup(kappa, loads.ei);
+        let mut z = V12::zeros();
+        z[0] = eq.pose.x;
+        z[1] = eq.pose.y;
+        z[2] = eq.pose.phi;
+        for i in 0..3 {
+            z[3 + i] = eq.lambda[i];
+        }
+        for i in 0..3 {
+            z[6 + 2 * i] = eq.m[i][0] - st.m0[i][0];
+            z[7 + 2 * i] = eq.m[i][1] - st.m0[i][1];
+        }
+        let f0 = self.loaded_residual(&st, loads, &z);
+        let mut fz = M12::zeros();
+        for k in 0..12 {
+            let h = 1e-7 * z[k].abs().max(if k == 2 { 1e-3 } else { 1.0 });
+            let mut zp = z;
+            zp[k] += h;
+            fz.set_column(k, &((self.loaded_residual(&st, loads, &zp) - f0) / h));
+        }
+        let lu = fz.lu();
+        let mut out = [[0.0; 3]; 5];
+        for (j, o) in out.iter_mut().enumerate() {
+            let mut l = *loads;
+            let h = 1e-3;
+            match j {
+                0 => l.force[0] += h,
+                1 => l.force[1] += h,
+                2 => l.couple += h,
+                3 => l.k_m += h,
+                _ => l.k_p += h,
+            }
+            let ft = (self.loaded_residual(&st, &l, &z) - f0) / h;
+            let dz = lu
+                .solve(&(-ft))
+                .ok_or(FkError::NoSolution { reached: 0.0 })?;
+            *o = [dz[0], dz[1], dz[2]];
+        }
+        Ok(out)
     }
 
     fn equilibrium_of(
@@ -377,5 +444,41 @@ mod tests {
         let eq0 = r.fk_loaded(&rigid, &unloaded(), &target).unwrap();
         assert!(eq0.pose.position_distance(&target) < 1e-9);
         assert_eq!(eq0.lambda, [0.0; 3]);
+    }
+
+    #[test]
+    fn load_response_is_the_derivative_of_the_loaded_pose() {
+        let r = Robot::nominal();
+        let target = Pose::from_mm_deg(-20.0, 30.0, -5.0);
+        let kappa = r.ik(&target).unwrap().kappa;
+        let base = Loads {
+            force: [0.2, -0.1],
+            k_m: 50.0,
+            ..unloaded()
+        };
+        let resp = r.load_response(&kappa, &base, &target).unwrap();
+        let p0 = r.fk_loaded(&kappa, &base, &target).unwrap().pose;
+        for j in 0..5 {
+            let mut l = base;
+            let h = [1e-3, 1e-3, 1e-1, 1e-1, 1e-1][j];
+            match j {
+                0 => l.force[0] += h,
+                1 => l.force[1] += h,
+                2 => l.couple += h,
+                3 => l.k_m += h,
+                _ => l.k_p += h,
+            }
+            let p = r.fk_loaded(&kappa, &l, &target).unwrap().pose;
+            let fd = [(p.x - p0.x) / h, (p.y - p0.y) / h, (p.phi - p0.phi) / h];
+            for k in 0..3 {
+                let tol = 1e-3 * fd[k].abs().max(resp[j][k].abs()) + 1e-9;
+                assert!(
+                    (fd[k] - resp[j][k]).abs() < tol.max(2e-6),
+                    "param {j} comp {k}: {} vs {}",
+                    resp[j][k],
+                    fd[k]
+                );
+            }
+        }
     }
 }
