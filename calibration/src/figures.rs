@@ -112,12 +112,18 @@ pub fn scatter_panels(
     Ok(())
 }
 
+/// An arrow: start point and displacement, mm.
+pub type Arrow = ((f64, f64), (f64, f64));
+
+/// A labelled curve: label, colour index (0..3 leg colours, 3 = grey), points.
+pub type Curve = (String, usize, Vec<(f64, f64)>);
+
 /// Error vectors at points, before (grey) and after (colour), magnified by `gain`.
 pub fn error_vectors(
     file: &Path,
     title: &str,
-    before: &[((f64, f64), (f64, f64))],
-    after: &[((f64, f64), (f64, f64))],
+    before: &[Arrow],
+    after: &[Arrow],
     gain: f64,
 ) -> Result<(), FigureError> {
     pcr_figures::init();
@@ -177,8 +183,8 @@ pub struct CurvePanel {
     pub title: String,
     /// Scatter points (measured).
     pub points: Vec<(f64, f64)>,
-    /// Curves: label, colour index (0..3 leg colours, 3 = grey), points.
-    pub curves: Vec<(String, usize, Vec<(f64, f64)>)>,
+    /// Curves.
+    pub curves: Vec<Curve>,
 }
 
 /// Panels of curves with data points (e.g. curvature over tendon displacement per leg).

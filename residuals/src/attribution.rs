@@ -1,0 +1,399 @@
+//! Attribution that cannot cheat: every candidate is fitted on the training blocks and scored
+//! on the held-out blocks; the best one is added only if it lowers the held-out error
+//! significantly (a paired test over the held-out blocks, Bonferroni-corrected over the
+//! candidates), by more than the smallest effect worth claiming, and the Bayesian information
+//! criterion on the training rows agrees. The model then really includes it (the full,
+//! non-linearised prediction is recomputed and must confirm the gain), and the search starts
+//! again. When nothing more is significant, what remains is compared with the capture noise and
+//! the features it correlates with are named.
+
+use crate::candidates::{self, Estimate, Fitted};
+use crate::context::{Context, Errors};
+use crate::features::{self, FeatureLink, Features};
+use crate::model::ExtendedModel;
+use crate::series::{Blocks, Series};
+use pcr_robot::RobotConfig;
+use serde::Serialize;
+use statrs::distribution::{ContinuousCDF, StudentsT};
+
+/// Settings of the attribution.
+#[derive(Debug, Clone, Serialize)]
+pub struct Options {
+    /// Family-wise significance level of one round (divided among the candidates).
+    pub alpha: f64,
+    /// Smallest RMS reduction of the held-out position error worth claiming, mm.
+    pub min_effect_mm: f64,
+    /// Largest number of effects added.
+    pub max_rounds: usize,
+    /// Candidates tried (names of [`candidates::NAMES`]).
+    pub candidates: Vec<String>,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            alpha: 1e-3,
+            min_effect_mm: 0.02,
+            max_rounds: 6,
+            candidates: candidates::NAMES.iter().map(|s| s.to_string()).collect(),
+        }
+    }
+}
+
+/// How one candidate scored in one round.
+#[derive(Debug, Clone, Serialize)]
+pub struct Score {
+    /// Round (1-based).
+    pub round: usize,
+    /// Candidate name.
+    pub name: String,
+    /// Its parameters.
+    pub params: Vec<Estimate>,
+    /// Held-out RMS of the weighted residual before (the reference) and with the candidate, mm.
+    pub held_out_rms_before_mm: f64,
+    /// With the candidate, mm.
+    pub held_out_rms_after_mm: f64,
+    /// sqrt of the held-out mean-square reduction, mm (negative: it made things worse).
+    pub effect_mm: f64,
+    /// One-sided p-value of the paired held-out block test.
+    pub p_value: f64,
+    /// BIC(candidate) - BIC(reference) on the training rows.
+    pub delta_bic: f64,
+    /// Whether it passed every test.
+    pub significant: bool,
+    /// Why not, if not.
+    pub note: String,
+}
+
+/// An effect added to the model.
+#[derive(Debug, Clone, Serialize)]
+pub struct Added {
+    /// Vocabulary name.
+    pub name: String,
+    /// What it is.
+    pub description: String,
+    /// Its parameters with uncertainties.
+    pub params: Vec<Estimate>,
+    /// The evidence: the score that selected it.
+    pub evidence: Score,
+    /// Held-out errors once the full model includes it.
+    pub held_out_after: Errors,
+}
+
+/// The verdict on the residual.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Verdict {
+    /// What remains is at the noise level.
+    Explained,
+    /// Effects were added but a significant structure remains.
+    PartlyExplained,
+    /// A significant structure remains and no candidate explains it.
+    Unexplained,
+}
+
+/// The result.
+#[derive(Debug, Clone, Serialize)]
+pub struct Attribution {
+    /// Held-out errors of the starting model.
+    pub before: Errors,
+    /// Held-out errors of the extended model.
+    pub after: Errors,
+    /// Effects added, in order.
+    pub effects: Vec<Added>,
+    /// Every candidate tried in every round.
+    pub candidates: Vec<Score>,
+    /// The verdict.
+    pub verdict: Verdict,
+    /// Capture noise of one row (x, y mm; phi deg) from the settled rows, if any.
+    pub noise: Option<[f64; 3]>,
+    /// RMS of the held-out weighted residual at the end against what the noise explains, mm.
+    pub remaining_rms_mm: f64,
+    /// The part of it above the noise, mm.
+    pub remaining_excess_mm: f64,
+    /// Features the remaining residual correlates with (held-out R^2), strongest first.
+    pub correlated_features: Vec<FeatureLink>,
+    /// Training rows, held-out rows.
+    pub rows: [usize; 2],
+    /// Blocks (train, held out).
+    pub blocks: [usize; 2],
+    /// Settings.
+    pub options: Options,
+    /// The extended robot configuration.
+    #[serde(skip)]
+    pub robot: RobotConfig,
+}
+
+/// Why the attribution failed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum AttributionError {
+    /// The model cannot be built.
+    #[error(transparent)]
+    Model(#[from] crate::model::ModelError),
+    /// Not enough rows.
+    #[error("{0}")]
+    Data(String),
+}
+
+fn sse_per_block(ctx: &Context, idx: &[usize], delta: Option<&[[f64; 3]]>, nb: usize) -> Vec<f64> {
+    let mut out = vec![0.0; nb];
+    for &i in idx {
+        let r = ctx.rows[i].r;
+        let d = delta.map_or([0.0; 3], |d| d[i]);
+        out[ctx.rows[i].block] +=
+            (r[0] - d[0]).powi(2) + (r[1] - d[1]).powi(2) + (r[2] - d[2]).powi(2);
+    }
+    out
+}
+
+/// One-sided paired t-test over the held-out blocks that `b` is smaller than `a`.
+fn paired_p(a: &[f64], b: &[f64], held: &[bool]) -> f64 {
+    let d: Vec<f64> = a
+        .iter()
+        .zip(b)
+        .zip(held)
+        .filter(|(_, h)| **h)
+        .map(|((x, y), _)| x - y)
+        .collect();
+    let n = d.len();
+    if n < 3 {
+        return 1.0;
+    }
+    let m = d.iter().sum::<f64>() / n as f64;
+    let sd = (d.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt();
+    if sd == 0.0 {
+        return if m > 0.0 { 0.0 } else { 1.0 };
+    }
+    let t = m / (sd / (n as f64).sqrt());
+    let Ok(dist) = StudentsT::new(0.0, 1.0, (n - 1) as f64) else {
+        return 1.0;
+    };
+    1.0 - dist.cdf(t)
+}
+
+fn rms(sse: f64, n: usize) -> f64 {
+    (sse / n.max(1) as f64).sqrt()
+}
+
+/// Scores a fitted candidate against a reference (residual change `reference`, or none).
+#[allow(clippy::too_many_arguments)]
+fn score(
+    round: usize,
+    ctx: &Context,
+    f: &Fitted,
+    reference: Option<&[[f64; 3]]>,
+    ref_train_sse: f64,
+    ref_k: usize,
+    train: &[usize],
+    test: &[usize],
+    blocks: &Blocks,
+    opts: &Options,
+    n_candidates: usize,
+) -> Score {
+    let nb = blocks.len();
+    let a = sse_per_block(ctx, test, reference, nb);
+    let b = sse_per_block(ctx, test, Some(&f.delta), nb);
+    let (sa, sb): (f64, f64) = (a.iter().sum(), b.iter().sum());
+    let p = paired_p(&a, &b, &blocks.held_out);
+    let n = 3 * train.len();
+    let bic = |sse: f64, k: usize| {
+        n as f64 * (sse.max(1e-300) / n as f64).ln() + k as f64 * (n as f64).ln()
+    };
+    let delta_bic = bic(f.train_sse, ref_k + f.k) - bic(ref_train_sse, ref_k);
+    // Position part of the reduction, per row (mm^2): the weighted residual has three parts.
+    let red = (sa - sb) / test.len().max(1) as f64;
+    let effect_mm = red.signum() * red.abs().sqrt();
+    let alpha = opts.alpha / n_candidates.max(1) as f64;
+    let mut note = Vec::new();
+    if p >= alpha {
+        note.push(format!("p = {p:.2e} >= {alpha:.1e}"));
+    }
+    if effect_mm < opts.min_effect_mm {
+        note.push(format!(
+            "held-out gain {effect_mm:.4} mm < {} mm",
+            opts.min_effect_mm
+        ));
+    }
+    if delta_bic >= 0.0 {
+        note.push(format!("BIC does not improve ({delta_bic:+.1})"));
+    }
+    Score {
+        round,
+        name: f.name.to_string(),
+        params: f.params.clone(),
+        held_out_rms_before_mm: rms(sa, test.len()),
+        held_out_rms_after_mm: rms(sb, test.len()),
+        effect_mm,
+        p_value: p,
+        delta_bic,
+        significant: note.is_empty(),
+        note: note.join("; "),
+    }
+}
+
+/// Runs the attribution: starting from `start` (the calibrated robot), on `series` with
+/// `blocks`.
+pub fn attribute(
+    start: &RobotConfig,
+    series: &[Series],
+    blocks: &Blocks,
+    opts: &Options,
+) -> Result<Attribution, AttributionError> {
+    let w_phi = start.legs.iter().map(|l| l.r_p_mm).sum::<f64>() / 3.0;
+    let mut config = start.clone();
+    let ctx0 = Context::new(series, ExtendedModel::new(&config)?, blocks, w_phi);
+    let (train0, test0) = (ctx0.train(), ctx0.test());
+    if train0.len() < 20 || test0.is_empty() {
+        return Err(AttributionError::Data(format!(
+            "{} training and {} held-out rows with a measured pose: too few to attribute anything",
+            train0.len(),
+            test0.len()
+        )));
+    }
+    let before = Errors::of(&ctx0, &test0);
+    let mut ctx = ctx0;
+    let mut scores = Vec::new();
+    let mut added: Vec<Added> = Vec::new();
+    let mut used: Vec<String> = Vec::new();
+    for round in 1..=opts.max_rounds {
+        let (train, test) = (ctx.train(), ctx.test());
+        let names: Vec<&String> = opts
+            .candidates
+            .iter()
+            .filter(|n| !used.contains(n) || *n == "periodic")
+            .collect();
+        // The reference for the effects: the recalibration (geometry) fit; for geometry itself,
+        // the model as it is.
+        let mut geo = candidates::geometry(&ctx, &train);
+        let geo_delta = geo.as_ref().map(|g| g.delta.clone());
+        let geo_sse = geo.as_ref().map_or(ctx.sse(&train, None), |g| g.train_sse);
+        let geo_k = geo.as_ref().map_or(0, |g| g.k);
+        let mut fits: Vec<(Fitted, Score)> = Vec::new();
+        for name in &names {
+            let fitted = if name.as_str() == "geometry" {
+                geo.take()
+            } else {
+                candidates::fit(name, &ctx, &train)
+            };
+            let Some(f) = fitted else {
+                continue;
+            };
+            let s = if f.name == "geometry" {
+                score(
+                    round,
+                    &ctx,
+                    &f,
+                    None,
+                    ctx.sse(&train, None),
+                    0,
+                    &train,
+                    &test,
+                    blocks,
+                    opts,
+                    names.len(),
+                )
+            } else {
+                score(
+                    round,
+                    &ctx,
+                    &f,
+                    geo_delta.as_deref(),
+                    geo_sse,
+                    geo_k,
+                    &train,
+                    &test,
+                    blocks,
+                    opts,
+                    names.len(),
+                )
+            };
+            scores.push(s.clone());
+            fits.push((f, s));
+        }
+        // The best significant candidate whose full model confirms the gain.
+        fits.sort_by(|a, b| b.1.effect_mm.total_cmp(&a.1.effect_mm));
+        let mut accepted = false;
+        for (f, s) in fits.into_iter().filter(|(_, s)| s.significant) {
+            let mut next = config.clone();
+            (f.change)(&mut next);
+            if next.validate("extended robot").is_err() {
+                continue;
+            }
+            let Ok(model) = ExtendedModel::new(&next) else {
+                continue;
+            };
+            let nctx = Context::new(series, model, blocks, w_phi);
+            let ntest = nctx.test();
+            let old = ctx.sse(&test, None) / test.len() as f64;
+            let new = nctx.sse(&ntest, None) / ntest.len().max(1) as f64;
+            // The full model must keep at least half the linearised gain.
+            let target = s.held_out_rms_after_mm.powi(2);
+            if ntest.len() + 5 < test.len() || old - new < 0.5 * (old - target) || new >= old {
+                if let Some(last) = scores
+                    .iter_mut()
+                    .rev()
+                    .find(|x| x.name == s.name && x.round == round)
+                {
+                    last.significant = false;
+                    last.note = format!(
+                        "the full model does not confirm the gain (held-out mean square {old:.5} -> {new:.5} mm^2, linearised {target:.5})"
+                    );
+                }
+                continue;
+            }
+            used.push(f.name.to_string());
+            added.push(Added {
+                name: f.name.to_string(),
+                description: candidates::describe(f.name).to_string(),
+                params: f.params.clone(),
+                evidence: s.clone(),
+                held_out_after: Errors::of(&nctx, &ntest),
+            });
+            config = next;
+            ctx = nctx;
+            accepted = true;
+            break;
+        }
+        if !accepted {
+            break;
+        }
+    }
+    let (train, test) = (ctx.train(), ctx.test());
+    let after = Errors::of(&ctx, &test);
+    // What remains: against the noise, and the features it follows.
+    let noise = series.iter().find_map(|s| s.row_noise);
+    let remaining_ms = ctx.sse(&test, None) / test.len().max(1) as f64;
+    let noise_ms = noise.map_or(0.0, |n| n[0] * n[0] + n[1] * n[1] + (w_phi * n[2]).powi(2));
+    let excess = (remaining_ms - noise_ms).max(0.0).sqrt();
+    let feats = Features::of(&ctx);
+    let links = features::links(&ctx, &feats, &train, &test);
+    let structured: Vec<FeatureLink> = links
+        .into_iter()
+        .filter(|l| l.held_out_r2 > 0.05)
+        .take(6)
+        .collect();
+    let remains = excess > opts.min_effect_mm.max(0.25 * noise_ms.sqrt()) && !structured.is_empty();
+    let verdict = match (added.is_empty(), remains) {
+        (_, false) => Verdict::Explained,
+        (false, true) => Verdict::PartlyExplained,
+        (true, true) => Verdict::Unexplained,
+    };
+    Ok(Attribution {
+        before,
+        after,
+        effects: added,
+        candidates: scores,
+        verdict,
+        noise: noise.map(|n| [n[0], n[1], n[2].to_degrees()]),
+        remaining_rms_mm: remaining_ms.sqrt(),
+        remaining_excess_mm: excess,
+        correlated_features: if remains { structured } else { Vec::new() },
+        rows: [train.len(), test.len()],
+        blocks: [
+            blocks.held_out.iter().filter(|h| !**h).count(),
+            blocks.held_out.iter().filter(|h| **h).count(),
+        ],
+        options: opts.clone(),
+        robot: config,
+    })
+}

@@ -1,0 +1,767 @@
+//! The library of candidate effects a tendon-driven parallel continuum robot is known to have.
+//! Each has a name from a fixed vocabulary, a physical parameterisation, a fit against the
+//! residuals of the current model (linearised: the model's Jacobians at each row turn the
+//! effect's change of motor position, curvature, load or frame into a change of the predicted
+//! pose), and the change it makes to the robot file when it is accepted.
+//!
+//! Every candidate is fitted together with the calibration parameters (`Nuisance`: the paper's
+//! step-1 and step-2 set), so that an effect the calibration partly absorbed is estimated whole,
+//! and so that no effect gets the credit for a plain recalibration (which is the `geometry`
+//! candidate of its own).
+//!
+//! | name | effect | parameters |
+//! |---|---|---|
+//! | `backlash` | gear backlash / friction hysteresis: play on each motor | play b_i, steps |
+//! | `latency` | command-to-motion latency | tau, s |
+//! | `creep` | slow drift: tendon creep, first-order in time | gain_i, time constant T s |
+//! | `compliance` | kineto-static: external wrench and joint springs bend the segments | F_x, F_y N, M N mm, k_M, k_P N mm/rad |
+//! | `frame` | capture-frame misregistration | dx, dy mm, dphi deg |
+//! | `tendon_map` | remaining tendon-map nonlinearity | a richer Table I function per leg |
+//! | `geometry` | remaining geometric error (recalibration on every row) | the calibration parameters |
+//! | `periodic` | periodic transmission error of one motor | period P steps, amplitude A steps, phase |
+
+use crate::context::Context;
+use crate::linear::{self, motor_delta, Columns, Nuisance};
+use crate::model::{play, steps_at};
+use pcr_kinematics::statics::Loads;
+use pcr_kinematics::TendonMap;
+use pcr_robot::effects::{Backlash, Compliance, Creep, FrameCorrection, Latency, Periodic};
+use pcr_robot::{RobotConfig, TendonMapKind, TendonMapSpec};
+use serde::Serialize;
+
+/// Bending stiffness assumed for the compliance candidate when the robot file declares none,
+/// N mm^2 (the segments' nominal value; the loads found scale with it).
+pub const DEFAULT_EI: f64 = 6.5e4;
+
+/// A fitted parameter.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Estimate {
+    /// Name.
+    pub name: String,
+    /// Value.
+    pub value: f64,
+    /// Standard error (`None` where it could not be estimated).
+    pub std: Option<f64>,
+    /// Unit.
+    pub unit: String,
+}
+
+fn est(name: &str, value: f64, std: Option<f64>, unit: &str) -> Estimate {
+    Estimate {
+        name: name.into(),
+        value,
+        std: std.filter(|s| s.is_finite()),
+        unit: unit.into(),
+    }
+}
+
+/// The change an accepted candidate makes to the robot file.
+pub type Change = Box<dyn Fn(&mut RobotConfig) + Send + Sync>;
+
+/// A candidate fitted to the training rows.
+pub struct Fitted {
+    /// Vocabulary name.
+    pub name: &'static str,
+    /// The effect's parameters (not the nuisance).
+    pub params: Vec<Estimate>,
+    /// Number of free parameters of the effect (information criterion).
+    pub k: usize,
+    /// Predicted change of the residual of every row (effect and nuisance).
+    pub delta: Vec<[f64; 3]>,
+    /// Training SSE after the fit.
+    pub train_sse: f64,
+    /// What it writes into the robot file.
+    pub change: Change,
+}
+
+/// The names of the candidates, in the order they are tried.
+pub const NAMES: [&str; 8] = [
+    "geometry",
+    "tendon_map",
+    "frame",
+    "latency",
+    "backlash",
+    "creep",
+    "compliance",
+    "periodic",
+];
+
+/// One-line description of a candidate.
+pub fn describe(name: &str) -> &'static str {
+    match name {
+        "backlash" => "gear backlash / friction hysteresis: the output follows each motor through a play",
+        "latency" => "command-to-motion latency: the motion lags the command",
+        "creep" => "slow drift: tendon creep, elongation toward a share of the displacement with a time constant",
+        "compliance" => "kineto-static compliance: an external wrench and joint springs bend the segments",
+        "frame" => "capture-frame misregistration: a rigid transform between the measured and the robot frame",
+        "tendon_map" => "remaining tendon-map nonlinearity: a richer function of the tendon displacement",
+        "geometry" => "remaining geometric error: the calibration parameters refitted on every row",
+        "periodic" => "periodic transmission error: the output of one motor lags it periodically in its position",
+        _ => "unknown",
+    }
+}
+
+/// Fits with the nuisance: effect columns first, then the calibration parameters. `offset` is a
+/// fixed change of the residual (an effect with no free linear parameter at the chosen value).
+fn fit_joint(
+    ctx: &Context,
+    nui: &Nuisance,
+    train: &[usize],
+    n_e: usize,
+    effect: &dyn Fn(usize, &mut Columns),
+    offset: Option<&[[f64; 3]]>,
+) -> Option<(linear::LinearFit, Vec<[f64; 3]>)> {
+    let n = n_e + nui.n;
+    let cols = |i: usize, c: &mut Columns| {
+        effect(i, c);
+        nui.columns(ctx, i, c, n_e);
+    };
+    // Residual with the offset taken out: solve on a shifted context copy of r.
+    let fit = match offset {
+        Some(o) => {
+            let mut shifted = ctx.clone();
+            for (row, d) in shifted.rows.iter_mut().zip(o) {
+                for k in 0..3 {
+                    row.r[k] -= d[k];
+                }
+            }
+            linear::solve(&shifted, train, n, &cols)?
+        }
+        None => linear::solve(ctx, train, n, &cols)?,
+    };
+    let mut delta = linear::deltas(ctx, n, &fit.x, &cols);
+    if let Some(o) = offset {
+        for (d, oo) in delta.iter_mut().zip(o) {
+            for k in 0..3 {
+                d[k] += oo[k];
+            }
+        }
+    }
+    Some((fit, delta))
+}
+
+/// Applies the nuisance part (after `n_e` effect parameters) of a joint fit to a config.
+fn nuisance_change(nui: Nuisance, x: Vec<f64>, n_e: usize) -> impl Fn(&mut RobotConfig) {
+    move |c: &mut RobotConfig| nui.apply(&x[n_e..], c)
+}
+
+/// `geometry`: the calibration parameters refitted on every training row.
+pub fn geometry(ctx: &Context, train: &[usize]) -> Option<Fitted> {
+    let nui = Nuisance::of(ctx);
+    let (fit, delta) = fit_joint(ctx, &nui, train, 0, &|_, _| {}, None)?;
+    let params = nui
+        .names()
+        .iter()
+        .zip(&fit.x)
+        .zip(&fit.std)
+        .map(|((n, v), s)| est(n, *v, Some(*s), "change"))
+        .collect();
+    let k = nui.n;
+    let sse = fit.sse;
+    let x = fit.x;
+    Some(Fitted {
+        name: "geometry",
+        params,
+        k,
+        delta,
+        train_sse: sse,
+        change: Box::new(move |c| nui.apply(&x, c)),
+    })
+}
+
+/// `frame`: measured = robot pose through a small rigid transform.
+pub fn frame(ctx: &Context, train: &[usize]) -> Option<Fitted> {
+    let nui = Nuisance::of(ctx);
+    let effect = |i: usize, c: &mut Columns| {
+        let row = &ctx.rows[i];
+        let m = ctx.series[row.s].samples[row.k].pose.unwrap_or([0.0; 3]);
+        // Correcting the measurement by (dx, dy, dphi) adds these to the residual; as a
+        // predicted change of the residual they enter with the opposite sign.
+        c[0] = [-1.0, 0.0, 0.0];
+        c[1] = [0.0, -1.0, 0.0];
+        c[2] = [m[1], -m[0], -ctx.w_phi];
+    };
+    let (fit, delta) = fit_joint(ctx, &nui, train, 3, &effect, None)?;
+    let f = FrameCorrection {
+        dx_mm: fit.x[0],
+        dy_mm: fit.x[1],
+        dphi_deg: fit.x[2].to_degrees(),
+    };
+    let params = vec![
+        est("dx", f.dx_mm, Some(fit.std[0]), "mm"),
+        est("dy", f.dy_mm, Some(fit.std[1]), "mm"),
+        est("dphi", f.dphi_deg, Some(fit.std[2].to_degrees()), "deg"),
+    ];
+    let nuis = nuisance_change(nui, fit.x.clone(), 3);
+    Some(Fitted {
+        name: "frame",
+        params,
+        k: 3,
+        delta,
+        train_sse: fit.sse,
+        change: Box::new(move |c| {
+            c.effects.frame = Some(f.clone());
+            nuis(c);
+        }),
+    })
+}
+
+/// Effect-only SSE of a fixed residual change on the training rows.
+fn sse_of(ctx: &Context, train: &[usize], delta: &[[f64; 3]]) -> f64 {
+    ctx.sse(train, Some(delta))
+}
+
+/// A 1-D minimisation of `f` on a grid, refined by golden section around the best point;
+/// returns (x, f(x), curvature estimate).
+fn minimise_1d(f: &mut dyn FnMut(f64) -> f64, grid: &[f64]) -> (f64, f64, Option<f64>) {
+    let vals: Vec<f64> = grid.iter().map(|&x| f(x)).collect();
+    let k = (0..grid.len())
+        .min_by(|a, b| vals[*a].total_cmp(&vals[*b]))
+        .unwrap_or(0);
+    let lo = grid[k.saturating_sub(1)];
+    let hi = grid[(k + 1).min(grid.len() - 1)];
+    let (mut a, mut b) = (lo, hi);
+    let gr = 0.5 * (5f64.sqrt() - 1.0);
+    let mut c = b - gr * (b - a);
+    let mut d = a + gr * (b - a);
+    let (mut fc, mut fd) = (f(c), f(d));
+    for _ in 0..30 {
+        if fc < fd {
+            b = d;
+            d = c;
+            fd = fc;
+            c = b - gr * (b - a);
+            fc = f(c);
+        } else {
+            a = c;
+            c = d;
+            fc = fd;
+            d = a + gr * (b - a);
+            fd = f(d);
+        }
+    }
+    let (x, fx) = if fc < fd { (c, fc) } else { (d, fd) };
+    let (x, fx) = if vals[k] < fx {
+        (grid[k], vals[k])
+    } else {
+        (x, fx)
+    };
+    let h = ((hi - lo) * 0.05).max(1e-9);
+    let curv = (f(x + h) - 2.0 * fx + f(x - h)) / (h * h);
+    (x, fx, (curv > 0.0).then_some(curv))
+}
+
+/// Standard error of a profiled parameter from the curvature of the SSE.
+fn profile_std(sse: f64, n: usize, curv: Option<f64>) -> Option<f64> {
+    let s2 = sse / n.max(2) as f64;
+    curv.map(|c| (2.0 * s2 / c).sqrt())
+}
+
+/// `latency`: the motion lags the command by tau.
+pub fn latency(ctx: &Context, train: &[usize]) -> Option<Fitted> {
+    let shift = |tau: f64| -> Vec<[f64; 3]> {
+        ctx.rows
+            .iter()
+            .enumerate()
+            .map(|(i, row)| {
+                let s = &ctx.series[row.s];
+                let t = s.samples[row.k].t_s;
+                let a = steps_at(s, t - tau);
+                let q = s.samples[row.k].q;
+                motor_delta(ctx, i, [a[0] - q[0], a[1] - q[1], a[2] - q[2]])
+            })
+            .collect()
+    };
+    let grid: Vec<f64> = (0..=60).map(|k| -0.1 + 0.01 * k as f64).collect();
+    let (tau, sse, curv) = minimise_1d(&mut |t| sse_of(ctx, train, &shift(t)), &grid);
+    let std = profile_std(sse, 3 * train.len(), curv);
+    let nui = Nuisance::of(ctx);
+    let off = shift(tau);
+    let (fit, delta) = fit_joint(ctx, &nui, train, 0, &|_, _| {}, Some(&off))?;
+    let nuis = nuisance_change(nui, fit.x.clone(), 0);
+    Some(Fitted {
+        name: "latency",
+        params: vec![est("latency", tau, std, "s")],
+        k: 1,
+        delta,
+        train_sse: fit.sse,
+        change: Box::new(move |c| {
+            c.effects.latency = Some(Latency { latency_s: tau });
+            nuis(c);
+        }),
+    })
+}
+
+/// `backlash`: play of b_i steps on each motor.
+pub fn backlash(ctx: &Context, train: &[usize]) -> Option<Fitted> {
+    // The play output of every series and motor for a width.
+    let plays = |b: [f64; 3]| -> Vec<Vec<[f64; 3]>> {
+        ctx.series
+            .iter()
+            .map(|s| {
+                let mut out: Vec<[f64; 3]> = s.samples.iter().map(|x| x.q).collect();
+                for i in 0..3 {
+                    if b[i] == 0.0 {
+                        continue;
+                    }
+                    let col: Vec<f64> = s.samples.iter().map(|x| x.q[i]).collect();
+                    let start = col.first().copied().unwrap_or(0.0);
+                    for (o, v) in out.iter_mut().zip(play(&col, b[i], start)) {
+                        o[i] = v;
+                    }
+                }
+                out
+            })
+            .collect()
+    };
+    let delta_of = |b: [f64; 3]| -> Vec<[f64; 3]> {
+        let p = plays(b);
+        ctx.rows
+            .iter()
+            .enumerate()
+            .map(|(i, row)| {
+                let q = ctx.series[row.s].samples[row.k].q;
+                let o = p[row.s][row.k];
+                motor_delta(ctx, i, [o[0] - q[0], o[1] - q[1], o[2] - q[2]])
+            })
+            .collect()
+    };
+    let grid: Vec<f64> = (0..=40).map(|k| 0.5 * k as f64).collect();
+    let mut b = [0.0; 3];
+    let mut stds = [None; 3];
+    let mut sse = 0.0;
+    for _sweep in 0..2 {
+        for m in 0..3 {
+            let (x, s, curv) = minimise_1d(
+                &mut |v| {
+                    let mut bb = b;
+                    bb[m] = v.max(0.0);
+                    sse_of(ctx, train, &delta_of(bb))
+                },
+                &grid,
+            );
+            b[m] = x.max(0.0);
+            sse = s;
+            stds[m] = profile_std(s, 3 * train.len(), curv);
+        }
+    }
+    let _ = sse;
+    let nui = Nuisance::of(ctx);
+    let off = delta_of(b);
+    let (fit, delta) = fit_joint(ctx, &nui, train, 0, &|_, _| {}, Some(&off))?;
+    let nuis = nuisance_change(nui, fit.x.clone(), 0);
+    Some(Fitted {
+        name: "backlash",
+        params: (0..3)
+            .map(|m| est(&format!("play motor {}", m + 1), b[m], stds[m], "steps"))
+            .collect(),
+        k: 3,
+        delta,
+        train_sse: fit.sse,
+        change: Box::new(move |c| {
+            c.effects.backlash = Some(Backlash { steps: b });
+            nuis(c);
+        }),
+    })
+}
+
+/// `creep`: the tendon lengthens toward gain_i dl_i with time constant T.
+pub fn creep(ctx: &Context, train: &[usize]) -> Option<Fitted> {
+    let mmps: [f64; 3] = std::array::from_fn(|i| ctx.model.config.legs[i].actuation.mm_per_step());
+    // E_i(T): the first-order lag of dl_i, per row (in steps: divided by mm/step).
+    let lag = |t_c: f64| -> Vec<Vec<[f64; 3]>> {
+        ctx.series
+            .iter()
+            .zip(&ctx.preds)
+            .map(|(s, p)| {
+                let mut e = [0.0f64; 3];
+                let mut prev = s.samples.first().map_or(0.0, |x| x.t_s);
+                s.samples
+                    .iter()
+                    .zip(p)
+                    .map(|(x, pr)| {
+                        let a = 1.0 - (-(x.t_s - prev).max(0.0) / t_c).exp();
+                        prev = x.t_s;
+                        std::array::from_fn(|i| {
+                            e[i] += (pr.dl_eff[i] - e[i]) * a;
+                            e[i] / mmps[i]
+                        })
+                    })
+                    .collect()
+            })
+            .collect()
+    };
+    let nui = Nuisance::of(ctx);
+    let effect_for = |l: &Vec<Vec<[f64; 3]>>, i: usize, c: &mut Columns| {
+        let row = &ctx.rows[i];
+        let e = l[row.s][row.k];
+        for m in 0..3 {
+            let mut dq = [0.0; 3];
+            dq[m] = -e[m];
+            c[m] = motor_delta(ctx, i, dq);
+        }
+    };
+    let sse_for = |t_c: f64| -> f64 {
+        let l = lag(t_c);
+        linear::solve(ctx, train, 3, &|i, c| effect_for(&l, i, c)).map_or(f64::INFINITY, |f| f.sse)
+    };
+    let grid: Vec<f64> = [2.0f64, 5.0, 10.0, 20.0, 40.0, 80.0, 160.0, 320.0, 640.0]
+        .iter()
+        .map(|v| v.ln())
+        .collect();
+    let (lt, sse, curv) = minimise_1d(&mut |x| sse_for(x.exp()), &grid);
+    let t_c = lt.exp();
+    let std_t = profile_std(sse, 3 * train.len(), curv).map(|s| s * t_c);
+    let l = lag(t_c);
+    let (fit, delta) = fit_joint(ctx, &nui, train, 3, &|i, c| effect_for(&l, i, c), None)?;
+    let gain = [fit.x[0], fit.x[1], fit.x[2]];
+    let mut params: Vec<Estimate> = (0..3)
+        .map(|m| {
+            est(
+                &format!("gain leg {}", m + 1),
+                gain[m],
+                Some(fit.std[m]),
+                "mm/mm",
+            )
+        })
+        .collect();
+    params.push(est("time constant", t_c, std_t, "s"));
+    let nuis = nuisance_change(nui, fit.x.clone(), 3);
+    let ok = gain.iter().all(|g| g.abs() < 0.5);
+    ok.then(|| Fitted {
+        name: "creep",
+        params,
+        k: 4,
+        delta,
+        train_sse: fit.sse,
+        change: Box::new(move |c| {
+            c.effects.creep = Some(Creep {
+                gain,
+                time_constant_s: t_c,
+            });
+            nuis(c);
+        }),
+    })
+}
+
+/// `compliance`: an external wrench and joint springs bend the segments (EI from the robot file
+/// or [`DEFAULT_EI`]).
+pub fn compliance(ctx: &Context, train: &[usize]) -> Option<Fitted> {
+    let base = ctx
+        .model
+        .config
+        .effects
+        .compliance
+        .clone()
+        .unwrap_or(Compliance {
+            ei_n_mm2: DEFAULT_EI,
+            force_n: [0.0; 2],
+            couple_n_mm: 0.0,
+            k_m_n_mm_per_rad: 0.0,
+            k_p_n_mm_per_rad: 0.0,
+        });
+    let loads = Loads::from_compliance(&base);
+    // Per-row responses to the five load parameters (scaled to per N, per 100 N mm, per
+    // 100 N mm/rad for conditioning).
+    let scale = [1.0, 1.0, 100.0, 100.0, 100.0];
+    let resp: Vec<[[f64; 3]; 5]> = ctx
+        .rows
+        .iter()
+        .map(|row| {
+            let p = ctx.pred(row);
+            let Some(pose) = p.pose else {
+                return [[0.0; 3]; 5];
+            };
+            let guess = pcr_kinematics::Pose::new(pose[0], pose[1], pose[2]);
+            ctx.model
+                .robot
+                .load_response(&p.kappa, &loads, &guess)
+                .unwrap_or([[0.0; 3]; 5])
+        })
+        .collect();
+    let effect = |i: usize, c: &mut Columns| {
+        for j in 0..5 {
+            let r = resp[i][j];
+            c[j] = [
+                r[0] * scale[j],
+                r[1] * scale[j],
+                r[2] * scale[j] * ctx.w_phi,
+            ];
+        }
+    };
+    let nui = Nuisance::of(ctx);
+    let (fit, delta) = fit_joint(ctx, &nui, train, 5, &effect, None)?;
+    let v: Vec<f64> = (0..5).map(|j| fit.x[j] * scale[j]).collect();
+    let s: Vec<f64> = (0..5).map(|j| fit.std[j] * scale[j]).collect();
+    let new = Compliance {
+        ei_n_mm2: base.ei_n_mm2,
+        force_n: [base.force_n[0] + v[0], base.force_n[1] + v[1]],
+        couple_n_mm: base.couple_n_mm + v[2],
+        k_m_n_mm_per_rad: base.k_m_n_mm_per_rad + v[3],
+        k_p_n_mm_per_rad: base.k_p_n_mm_per_rad + v[4],
+    };
+    let params = vec![
+        est("force x", new.force_n[0], Some(s[0]), "N"),
+        est("force y", new.force_n[1], Some(s[1]), "N"),
+        est("couple", new.couple_n_mm, Some(s[2]), "N mm"),
+        est("k_M", new.k_m_n_mm_per_rad, Some(s[3]), "N mm/rad"),
+        est("k_P", new.k_p_n_mm_per_rad, Some(s[4]), "N mm/rad"),
+        est("EI (assumed)", new.ei_n_mm2, None, "N mm^2"),
+    ];
+    let nuis = nuisance_change(nui, fit.x.clone(), 5);
+    Some(Fitted {
+        name: "compliance",
+        params,
+        k: 5,
+        delta,
+        train_sse: fit.sse,
+        change: Box::new(move |c| {
+            c.effects.compliance = Some(new.clone());
+            nuis(c);
+        }),
+    })
+}
+
+/// `tendon_map`: a richer function of the tendon displacement per leg: the current map plus a
+/// correction in the basis of the richest Table I family (root series to dl^(1/6)) and dl|dl|,
+/// dl^3; written back as the Table I function that reproduces it best over the data's range.
+pub fn tendon_map(ctx: &Context, train: &[usize]) -> Option<Fitted> {
+    // Extra basis per leg: dl|dl|, dl^3, s|dl|^(1/2), s|dl|^(1/3).
+    const NB: usize = 4;
+    let basis = |dl: f64| -> [f64; NB] {
+        let a = dl.abs();
+        let s = dl.signum();
+        [dl * a, dl * dl * dl, s * a.sqrt(), s * a.cbrt()]
+    };
+    let effect = |i: usize, c: &mut Columns| {
+        let p = ctx.pred(&ctx.rows[i]);
+        for leg in 0..3 {
+            let b = basis(p.dl_eff[leg]);
+            for (j, bj) in b.iter().enumerate() {
+                c[leg * NB + j] = [
+                    p.j_kappa[(0, leg)] * bj,
+                    p.j_kappa[(1, leg)] * bj,
+                    p.j_kappa[(2, leg)] * bj * ctx.w_phi,
+                ];
+            }
+        }
+    };
+    let nui = Nuisance::of(ctx);
+    let (fit, delta) = fit_joint(ctx, &nui, train, 3 * NB, &effect, None)?;
+    // The displacement range of the data, per leg.
+    let mut range = [[f64::INFINITY, f64::NEG_INFINITY]; 3];
+    for row in &ctx.rows {
+        let p = ctx.pred(row);
+        for leg in 0..3 {
+            range[leg][0] = range[leg][0].min(p.dl_eff[leg]);
+            range[leg][1] = range[leg][1].max(p.dl_eff[leg]);
+        }
+    }
+    let x = fit.x.clone();
+    let nuis = nuisance_change(nui, fit.x.clone(), 3 * NB);
+    let params = (0..3)
+        .flat_map(|leg| {
+            let names = ["dl|dl|", "dl^3", "dl^(1/2)", "dl^(1/3)"];
+            let fit = &fit;
+            names.into_iter().enumerate().map(move |(j, n)| {
+                est(
+                    &format!("leg {} {n}", leg + 1),
+                    fit.x[leg * NB + j],
+                    Some(fit.std[leg * NB + j]),
+                    "1/mm per unit",
+                )
+            })
+        })
+        .collect();
+    Some(Fitted {
+        name: "tendon_map",
+        params,
+        k: 3 * NB,
+        delta,
+        train_sse: fit.sse,
+        change: Box::new(move |c| {
+            nuis(c);
+            for leg in 0..3 {
+                let corr = |dl: f64| -> f64 {
+                    let b = basis(dl);
+                    (0..NB).map(|j| x[leg * NB + j] * b[j]).sum::<f64>()
+                };
+                let lo = range[leg][0];
+                let hi = range[leg][1].max(lo + 1e-6);
+                let current = TendonMap::from_leg(&c.legs[leg]);
+                let target: Vec<(f64, f64)> = (0..=200)
+                    .map(|k| {
+                        let dl = lo + (hi - lo) * k as f64 / 200.0;
+                        (dl, current.kappa(dl) + corr(dl))
+                    })
+                    .collect();
+                if let Some(spec) = best_family(&target) {
+                    c.legs[leg].tendon_map = spec;
+                }
+            }
+        }),
+    })
+}
+
+/// The Table I function that reproduces (dl, kappa) samples best (least squares, smallest
+/// maximum error), with its coefficients.
+pub fn best_family(target: &[(f64, f64)]) -> Option<TendonMapSpec> {
+    let mut best: Option<(f64, TendonMapSpec)> = None;
+    for kind in TendonMapKind::ALL {
+        let Some(c) = linear_fit(kind, target) else {
+            continue;
+        };
+        let m = TendonMap::new(kind, &c);
+        if m.dl_for_kappa(m.kappa(0.0)).is_err() {
+            continue;
+        }
+        let err = target
+            .iter()
+            .map(|(d, k)| (m.kappa(*d) - k).abs())
+            .fold(0.0, f64::max);
+        if best.as_ref().is_none_or(|b| err < b.0 * 0.999) {
+            best = Some((
+                err,
+                TendonMapSpec {
+                    model: kind,
+                    coeffs: c,
+                },
+            ));
+        }
+    }
+    best.map(|b| b.1)
+}
+
+fn linear_fit(kind: TendonMapKind, pts: &[(f64, f64)]) -> Option<Vec<f64>> {
+    let off = usize::from(!kind.has_offset());
+    let nc = kind.n_coeffs();
+    let mut a = nalgebra::DMatrix::zeros(pts.len(), nc);
+    let mut b = nalgebra::DVector::zeros(pts.len());
+    let mut basis = [0.0; 7];
+    for (r, (dl, k)) in pts.iter().enumerate() {
+        TendonMap::basis(kind, *dl, &mut basis);
+        for c in 0..nc {
+            a[(r, c)] = basis[c + off];
+        }
+        b[r] = *k;
+    }
+    let s: Vec<f64> = (0..nc).map(|c| a.column(c).norm().max(1e-300)).collect();
+    for (c, sc) in s.iter().enumerate() {
+        a.column_mut(c).unscale_mut(*sc);
+    }
+    let x = a.svd(true, true).solve(&b, 1e-12).ok()?;
+    let out: Vec<f64> = (0..nc).map(|c| x[c] / s[c]).collect();
+    out.iter().all(|v| v.is_finite()).then_some(out)
+}
+
+/// `periodic`: the output of one motor lags it by A sin(2 pi q / P + phase); every motor and
+/// every period from 4 steps to a revolution is scanned, the best pair is fitted.
+pub fn periodic(ctx: &Context, train: &[usize]) -> Option<Fitted> {
+    let spr = ctx.model.config.legs[0].actuation.steps_per_rev as f64;
+    let mut periods: Vec<f64> = (4..=256).map(f64::from).collect();
+    let mut p = 272.0;
+    while p <= spr {
+        periods.push(p);
+        p += 16.0;
+    }
+    // Precompute each train row's motor column (d weighted pose / d q_m) dotted with r and
+    // with itself, then scan.
+    let mut best: Option<(f64, usize, f64)> = None; // (sse reduction, motor, period)
+    for m in 0..3 {
+        let rows: Vec<([f64; 3], [f64; 3], f64)> = train
+            .iter()
+            .map(|&i| {
+                let mut dq = [0.0; 3];
+                dq[m] = 1.0;
+                let c = motor_delta(ctx, i, dq);
+                let row = &ctx.rows[i];
+                (c, row.r, ctx.pred(row).q_eff[m])
+            })
+            .collect();
+        for &per in &periods {
+            let w = std::f64::consts::TAU / per;
+            let (mut ss, mut sc, mut cc, mut rs, mut rc) = (0.0, 0.0, 0.0, 0.0, 0.0);
+            for (c, r, q) in &rows {
+                let (sn, cs) = (w * q).sin_cos();
+                let cr = c[0] * r[0] + c[1] * r[1] + c[2] * r[2];
+                let c2 = c[0] * c[0] + c[1] * c[1] + c[2] * c[2];
+                ss += c2 * sn * sn;
+                sc += c2 * sn * cs;
+                cc += c2 * cs * cs;
+                rs += cr * sn;
+                rc += cr * cs;
+            }
+            let det = ss * cc - sc * sc;
+            if det <= 0.0 {
+                continue;
+            }
+            let a = (cc * rs - sc * rc) / det;
+            let b = (ss * rc - sc * rs) / det;
+            let red = a * rs + b * rc;
+            if best.is_none_or(|x| red > x.0) {
+                best = Some((red, m, per));
+            }
+        }
+    }
+    let (_, m, per) = best?;
+    let w = std::f64::consts::TAU / per;
+    let effect = |i: usize, c: &mut Columns| {
+        let q = ctx.pred(&ctx.rows[i]).q_eff[m];
+        let mut dq = [0.0; 3];
+        dq[m] = 1.0;
+        let col = motor_delta(ctx, i, dq);
+        let (sn, cs) = (w * q).sin_cos();
+        c[0] = col.map(|v| v * sn);
+        c[1] = col.map(|v| v * cs);
+    };
+    let nui = Nuisance::of(ctx);
+    let (fit, delta) = fit_joint(ctx, &nui, train, 2, &effect, None)?;
+    // Output = q - A sin(w q + phase): the residual change is -A(sin cos(ph) + cos sin(ph)).
+    let (a_s, a_c) = (-fit.x[0], -fit.x[1]);
+    let amp = a_s.hypot(a_c);
+    let phase = a_c.atan2(a_s);
+    let amp_std = (fit.std[0].hypot(fit.std[1])) / 2f64.sqrt();
+    let nuis = nuisance_change(nui, fit.x.clone(), 2);
+    let entry = Periodic {
+        motor: (m + 1) as u8,
+        period_steps: per,
+        amplitude_steps: amp,
+        phase_deg: phase.to_degrees(),
+    };
+    Some(Fitted {
+        name: "periodic",
+        params: vec![
+            est("motor", (m + 1) as f64, None, ""),
+            est("period", per, None, "steps"),
+            est("amplitude", amp, Some(amp_std), "steps"),
+            est(
+                "phase",
+                phase.to_degrees(),
+                Some((amp_std / amp.max(1e-12)).to_degrees()),
+                "deg",
+            ),
+        ],
+        k: 4,
+        delta,
+        train_sse: fit.sse,
+        change: Box::new(move |c| {
+            c.effects.periodic.push(entry.clone());
+            nuis(c);
+        }),
+    })
+}
+
+/// Fits the candidate `name`.
+pub fn fit(name: &str, ctx: &Context, train: &[usize]) -> Option<Fitted> {
+    match name {
+        "geometry" => geometry(ctx, train),
+        "tendon_map" => tendon_map(ctx, train),
+        "frame" => frame(ctx, train),
+        "latency" => latency(ctx, train),
+        "backlash" => backlash(ctx, train),
+        "creep" => creep(ctx, train),
+        "compliance" => compliance(ctx, train),
+        "periodic" => periodic(ctx, train),
+        _ => None,
+    }
+}

@@ -1,0 +1,253 @@
+//! Linearised least squares over the rows of a context: the design columns of each row (the
+//! change of the weighted pose residual per unit parameter), the calibration parameters as
+//! nuisance columns, normal equations, covariance.
+
+use crate::context::Context;
+use nalgebra::{DMatrix, DVector};
+use pcr_kinematics::{Leg, TendonMap};
+use pcr_robot::geometry as g;
+
+/// Design columns of one row: `cols[j]` is d(predicted, weighted pose)/d(param j).
+pub type Columns = Vec<[f64; 3]>;
+
+/// A linear least-squares solution.
+#[derive(Debug, Clone)]
+pub struct LinearFit {
+    /// Parameters.
+    pub x: Vec<f64>,
+    /// Standard errors (sigma^2 (A^T A)^+).
+    pub std: Vec<f64>,
+    /// Training SSE after the fit.
+    pub sse: f64,
+}
+
+/// Solves min sum_rows |r - A x|^2 over the rows `idx`, where `cols(i)` gives A's columns for
+/// row i (each a weighted pose vector), through the normal equations with a truncated SVD.
+pub fn solve(
+    ctx: &Context,
+    idx: &[usize],
+    n: usize,
+    cols: &dyn Fn(usize, &mut Columns),
+) -> Option<LinearFit> {
+    if n == 0 || idx.is_empty() {
+        return None;
+    }
+    let mut ata = DMatrix::<f64>::zeros(n, n);
+    let mut atr = DVector::<f64>::zeros(n);
+    let mut c: Columns = vec![[0.0; 3]; n];
+    let mut rr = 0.0;
+    for &i in idx {
+        cols(i, &mut c);
+        let r = ctx.rows[i].r;
+        rr += r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
+        for a in 0..n {
+            atr[a] += c[a][0] * r[0] + c[a][1] * r[1] + c[a][2] * r[2];
+            for b in a..n {
+                ata[(a, b)] += c[a][0] * c[b][0] + c[a][1] * c[b][1] + c[a][2] * c[b][2];
+            }
+        }
+    }
+    for a in 0..n {
+        for b in 0..a {
+            ata[(a, b)] = ata[(b, a)];
+        }
+    }
+    // Scale columns for conditioning.
+    let s: Vec<f64> = (0..n).map(|a| ata[(a, a)].sqrt().max(1e-300)).collect();
+    let mut sa = ata.clone();
+    for a in 0..n {
+        for b in 0..n {
+            sa[(a, b)] /= s[a] * s[b];
+        }
+    }
+    let sr = DVector::from_fn(n, |a, _| atr[a] / s[a]);
+    let svd = sa.clone().svd(true, true);
+    let smax = svd.singular_values.max();
+    let tol = smax * 1e-10;
+    let pinv = svd.pseudo_inverse(tol).ok()?;
+    let xs = &pinv * &sr;
+    let x: Vec<f64> = (0..n).map(|a| xs[a] / s[a]).collect();
+    // SSE = r.r - 2 x.A^T r + x.A^T A x
+    let xv = DVector::from_column_slice(&x);
+    let sse = (rr - 2.0 * xv.dot(&atr) + (xv.transpose() * &ata * &xv)[(0, 0)]).max(0.0);
+    let dof = (3 * idx.len()).saturating_sub(n).max(1) as f64;
+    let s2 = sse / dof;
+    let std = (0..n)
+        .map(|a| (s2 * pinv[(a, a)]).max(0.0).sqrt() / s[a])
+        .collect();
+    x.iter()
+        .all(|v| v.is_finite())
+        .then_some(LinearFit { x, std, sse })
+}
+
+/// The deltas (weighted pose changes) of every row for parameters `x`.
+pub fn deltas(
+    ctx: &Context,
+    n: usize,
+    x: &[f64],
+    cols: &dyn Fn(usize, &mut Columns),
+) -> Vec<[f64; 3]> {
+    let mut c: Columns = vec![[0.0; 3]; n];
+    (0..ctx.rows.len())
+        .map(|i| {
+            cols(i, &mut c);
+            let mut d = [0.0; 3];
+            for (a, col) in c.iter().enumerate() {
+                for k in 0..3 {
+                    d[k] += col[k] * x[a];
+                }
+            }
+            d
+        })
+        .collect()
+}
+
+/// Weighted pose change of a row for a change of the effective motor positions, steps.
+pub fn motor_delta(ctx: &Context, i: usize, dq: [f64; 3]) -> [f64; 3] {
+    let j = &ctx.pred(&ctx.rows[i]).j_q;
+    let mut d = [0.0; 3];
+    for a in 0..3 {
+        d[a] = j[(a, 0)] * dq[0] + j[(a, 1)] * dq[1] + j[(a, 2)] * dq[2];
+    }
+    d[2] *= ctx.w_phi;
+    d
+}
+
+/// The calibration parameters (the paper's step-1 and step-2 sets) as nuisance columns:
+/// per leg psi (deg), l_C (mm), the map coefficients, r_p (mm), theta_p (deg).
+pub struct Nuisance {
+    legs: [Leg; 3],
+    cfg: Vec<pcr_robot::LegConfig>,
+    n_map: [usize; 3],
+    /// Number of columns.
+    pub n: usize,
+    names: Vec<String>,
+}
+
+const GEO: [&str; 4] = ["psi_deg", "l_c_mm", "r_p_mm", "theta_p_deg"];
+
+impl Nuisance {
+    /// The nuisance set of the context's model.
+    pub fn of(ctx: &Context) -> Nuisance {
+        let cfg = ctx.model.config.legs.clone();
+        let legs = std::array::from_fn(|i| Leg::from_config(&cfg[i]));
+        let n_map: [usize; 3] = std::array::from_fn(|i| cfg[i].tendon_map.model.n_coeffs());
+        let mut names = Vec::new();
+        for i in 0..3 {
+            for gname in GEO {
+                names.push(format!("{gname}[{}]", i + 1));
+            }
+            for j in 0..n_map[i] {
+                names.push(format!("k{j}[{}]", i + 1));
+            }
+        }
+        Nuisance {
+            legs,
+            n: names.len(),
+            names,
+            cfg,
+            n_map,
+        }
+    }
+
+    /// Column names.
+    pub fn names(&self) -> &[String] {
+        &self.names
+    }
+
+    /// Offset of leg i's columns.
+    fn offset(&self, i: usize) -> usize {
+        (0..i).map(|l| GEO.len() + self.n_map[l]).sum()
+    }
+
+    /// The columns of row `i` (appended after `start` in `out`).
+    pub fn columns(&self, ctx: &Context, i: usize, out: &mut Columns, start: usize) {
+        let row = &ctx.rows[i];
+        let p = ctx.pred(row);
+        let Some(pose) = p.pose else {
+            for c in out.iter_mut().skip(start).take(self.n) {
+                *c = [0.0; 3];
+            }
+            return;
+        };
+        let x = pcr_kinematics::Pose::new(pose[0], pose[1], pose[2]);
+        let a = ctx.model.robot.jacobian_a(&x, &p.kappa);
+        let Some(ainv) = a.try_inverse() else {
+            return;
+        };
+        let mut basis = [0.0; 7];
+        for leg in 0..3 {
+            let off = start + self.offset(leg);
+            // dh_leg/d param by finite differences of the constraint alone.
+            let h0 = self.constraint(leg, &self.cfg[leg], &x, p.kappa[leg]);
+            for (gk, name) in GEO.iter().enumerate() {
+                let mut c = self.cfg[leg].clone();
+                let step = 1e-4;
+                match *name {
+                    "psi_deg" => c.psi_deg += step,
+                    "l_c_mm" => c.l_c_mm += step,
+                    "r_p_mm" => c.r_p_mm += step,
+                    _ => c.theta_p_deg += step,
+                }
+                // l_C changes the curvature's effect through theta = kappa l_C: keep kappa.
+                let dh = (self.constraint(leg, &c, &x, p.kappa[leg]) - h0) / step;
+                let col = [
+                    -ainv[(0, leg)] * dh,
+                    -ainv[(1, leg)] * dh,
+                    -ainv[(2, leg)] * dh * ctx.w_phi,
+                ];
+                out[off + gk] = col;
+            }
+            // Map coefficients: d pose / d kappa_leg * basis_j(dl).
+            let kind = self.cfg[leg].tendon_map.model;
+            TendonMap::basis(kind, p.dl_eff[leg], &mut basis);
+            let skip = usize::from(!kind.has_offset());
+            for j in 0..self.n_map[leg] {
+                let b = basis[j + skip];
+                out[off + GEO.len() + j] = [
+                    p.j_kappa[(0, leg)] * b,
+                    p.j_kappa[(1, leg)] * b,
+                    p.j_kappa[(2, leg)] * b * ctx.w_phi,
+                ];
+            }
+        }
+    }
+
+    fn constraint(
+        &self,
+        leg: usize,
+        c: &pcr_robot::LegConfig,
+        x: &pcr_kinematics::Pose,
+        kappa: f64,
+    ) -> f64 {
+        let l = if std::ptr::eq(c, &self.cfg[leg]) {
+            self.legs[leg].clone()
+        } else {
+            Leg::from_config(c)
+        };
+        let m = l.joint_m(kappa);
+        let pe = g::rot(x.phi, c.platform_point());
+        let d = g::sub(g::add([x.x, x.y], pe), m);
+        g::dot(d, d) - c.l_st_mm * c.l_st_mm
+    }
+
+    /// Applies parameter changes `dx` (in column order) to a robot configuration's legs.
+    pub fn apply(&self, dx: &[f64], cfg: &mut pcr_robot::RobotConfig) {
+        for leg in 0..3 {
+            let off = self.offset(leg);
+            let l = &mut cfg.legs[leg];
+            l.psi_deg += dx[off];
+            l.l_c_mm += dx[off + 1];
+            l.r_p_mm += dx[off + 2];
+            l.theta_p_deg += dx[off + 3];
+            if l.tendon_map.coeffs.is_empty() {
+                // The nominal linear map written out: k0 = 1 / (a l_C) of the old length.
+                l.tendon_map.coeffs =
+                    vec![1.0 / (l.actuation.tendon_offset_mm * self.cfg[leg].l_c_mm)];
+            }
+            for j in 0..self.n_map[leg] {
+                l.tendon_map.coeffs[j] += dx[off + GEO.len() + j];
+            }
+        }
+    }
+}
