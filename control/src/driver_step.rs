@@ -21,6 +21,8 @@ pub struct DriverStep<D, P> {
     holding: bool,
     cycle: u64,
     stale_cycles: u64,
+    /// Capture-frame correction of the measured pose (`[effects.frame]`).
+    frame: Option<pcr_robot::effects::FrameCorrection>,
 }
 
 impl<D: Driver, P: PoseSensor> DriverStep<D, P> {
@@ -38,7 +40,13 @@ impl<D: Driver, P: PoseSensor> DriverStep<D, P> {
             holding: false,
             cycle: 0,
             stale_cycles: 0,
+            frame: None,
         }
+    }
+
+    /// Corrects every measured pose by a capture-frame correction (`[effects.frame]`).
+    pub fn set_frame_correction(&mut self, f: Option<pcr_robot::effects::FrameCorrection>) {
+        self.frame = f;
     }
 
     /// The driver.
@@ -110,7 +118,10 @@ impl<D: Driver, P: PoseSensor> DriverStep<D, P> {
         }
         let st = self.drv.read(t_s, self.period_s)?;
         self.reached = Some(st.steps);
-        let pose = self.sensor.measure(t_s, &st);
+        let pose = self.sensor.measure(t_s, &st).map(|p| match &self.frame {
+            Some(f) => pcr_kinematics::Pose::from_array(f.apply(p.to_array())),
+            None => p,
+        });
         let mut flags = 0;
         for (on, bit) in [
             (st.enabled, driver_flags::ENABLED),

@@ -1,13 +1,21 @@
 //! The IK step: task setpoint -> curvatures -> motor steps.
 
+use crate::compensation::MotorCompensation;
+use pcr_kinematics::statics::Loads;
 use pcr_kinematics::{Pose, Robot};
 use pcr_messages::{JointSetpoint, TaskSetpoint, PROTOCOL_VERSION};
 
 /// The IK step. When a setpoint has no IK solution it repeats the last valid joint setpoint
 /// (flagged `ik_failed`) so that the drive holds instead of jumping.
+///
+/// The effects the robot file declares are compensated here: the loaded IK with
+/// `[effects.compliance]`, and the motor side (creep, periodic errors, backlash) after it
+/// ([`MotorCompensation`]).
 #[derive(Debug)]
 pub struct IkStep {
     robot: Robot,
+    loads: Option<Loads>,
+    comp: MotorCompensation,
     last_steps: [i32; 3],
     last_kappa: [f64; 3],
     failures: u64,
@@ -17,8 +25,13 @@ impl IkStep {
     /// A step for `robot`, starting from its home configuration.
     pub fn new(robot: Robot) -> Self {
         let k = robot.home_kappa;
+        let e = &robot.config().effects;
+        let loads = e.compliance.as_ref().map(Loads::from_compliance);
+        let comp = MotorCompensation::new(robot.config());
         let mut s = Self {
             robot,
+            loads,
+            comp,
             last_steps: [0; 3],
             last_kappa: k,
             failures: 0,
@@ -37,26 +50,38 @@ impl IkStep {
         self.failures
     }
 
-    fn steps_of(&self, kappa: &[f64; 3]) -> Option<[i32; 3]> {
-        let mut q = [0i32; 3];
+    fn targets_of(&self, kappa: &[f64; 3]) -> Option<[f64; 3]> {
+        let mut q = [0.0; 3];
         for i in 0..3 {
             let s = self.robot.kappa_to_steps(i, kappa[i]).ok()?;
-            if !s.is_finite() || s.abs() > i32::MAX as f64 {
+            if !s.is_finite() || s.abs() > 1e9 {
                 return None;
             }
-            q[i] = s.round() as i32;
+            q[i] = s;
         }
         Some(q)
+    }
+
+    fn steps_of(&self, kappa: &[f64; 3]) -> Option<[i32; 3]> {
+        self.targets_of(kappa).map(|q| q.map(|v| v.round() as i32))
     }
 
     /// One cycle. Allocation-free.
     pub fn step(&mut self, sp: &TaskSetpoint) -> JointSetpoint {
         let pose = Pose::new(sp.x_mm, sp.y_mm, sp.phi_rad);
-        let sol = self
-            .robot
-            .ik(&pose)
-            .ok()
-            .and_then(|s| self.steps_of(&s.kappa).map(|q| (s.kappa, q)));
+        let kappa = match &self.loads {
+            Some(l) => self.robot.ik_loaded(&pose, l).ok(),
+            None => self.robot.ik(&pose).ok().map(|s| s.kappa),
+        };
+        let sol = kappa.and_then(|k| self.targets_of(&k).map(|q| (k, q)));
+        let sol = sol.map(|(k, q)| {
+            let q = if self.comp.is_active() {
+                self.comp.command(sp.t_s, q)
+            } else {
+                q
+            };
+            (k, q.map(|v| v.round() as i32))
+        });
         let ik_failed = match sol {
             Some((k, q)) => {
                 self.last_kappa = k;

@@ -397,6 +397,9 @@ pub struct InterpolatorStep<S> {
     ramp: Option<Ramp>,
     /// The pose the current program was planned from.
     origin: Pose,
+    /// Command-to-motion latency fed forward: the commanded pose is the program's pose this much
+    /// later (program time at the current rate); the nominal pose stays at the present, s.
+    lead_s: f64,
 }
 
 /// A change of the program-time rate: program time follows the 1-DoF profile's position.
@@ -428,6 +431,7 @@ impl<S: SetpointSource> InterpolatorStep<S> {
             done_sent: false,
             history: [(0, 0.0); HISTORY],
             rate: 0.0,
+            lead_s: 0.0,
             ramp: None,
             origin: home,
         }
@@ -642,6 +646,14 @@ impl<S: SetpointSource> InterpolatorStep<S> {
         (Ok(()), old)
     }
 
+    /// Feeds a command-to-motion latency forward (`[effects.latency]`): commanded poses lead the
+    /// nominal ones by `lead_s` of program time, s.
+    pub fn set_lead(&mut self, lead_s: f64) {
+        if lead_s.is_finite() {
+            self.lead_s = lead_s;
+        }
+    }
+
     /// Applies a task-space correction offset (x mm, y mm, phi rad) to later setpoints.
     pub fn set_correction(&mut self, c: &Correction) {
         if c.offset.iter().all(|v| v.is_finite()) {
@@ -714,11 +726,18 @@ impl<S: SetpointSource> InterpolatorStep<S> {
         self.seq += 1;
         self.history[(self.seq % HISTORY as u64) as usize] = (self.seq, self.tau_s);
         let p = self.hold;
+        let active = self.state == planner_state::RUNNING || self.ramp.is_some();
+        let c = if self.lead_s != 0.0 && active {
+            let tau = (self.tau_s + self.lead_s * self.rate).clamp(0.0, self.duration_s);
+            self.source.sample(tau)
+        } else {
+            p
+        };
         TaskSetpoint {
             t_s,
-            x_mm: p.x + self.offset[0],
-            y_mm: p.y + self.offset[1],
-            phi_rad: p.phi + self.offset[2],
+            x_mm: c.x + self.offset[0],
+            y_mm: c.y + self.offset[1],
+            phi_rad: c.phi + self.offset[2],
             nominal: [p.x, p.y, p.phi],
             seq: self.seq,
             run_id: self.run_id,

@@ -89,24 +89,36 @@ impl InterimChain {
 pub type SimChain = InProcessChain<PlannerSource, SafeDriver<PlantDrive>, PlantSensor>;
 
 impl SimChain {
-    /// The chain for a robot configuration and a plant configuration at `period_s`, starting at
-    /// the plant's home motor positions.
+    /// The chain for a robot configuration (the model that drives, with the effects it
+    /// compensates) and a plant configuration (the truth, deviating from its own drawing) at
+    /// `period_s`, starting at the plant's home motor positions.
     pub fn simulated(
         robot_cfg: &RobotConfig,
         plant_cfg: &PlantConfig,
         period_s: f64,
     ) -> Result<Self, SimChainError> {
         let robot = Robot::new(robot_cfg).map_err(|e| SimChainError::Robot(e.to_string()))?;
+        // The plant deviates from its own drawing, never from the model that drives it.
+        let drawing = plant_cfg
+            .drawing()
+            .map_err(|e| SimChainError::Plant(e.to_string()))?;
         let (drive, sensor) =
-            plant_backend(robot_cfg, plant_cfg).map_err(|e| SimChainError::Plant(e.to_string()))?;
+            plant_backend(&drawing, plant_cfg).map_err(|e| SimChainError::Plant(e.to_string()))?;
         let drive = safety_stack(drive, &robot, 5.0 * period_s);
+        let mut interp = InterpolatorStep::new(
+            PlannerSource::new(robot.clone(), MotionLimits::default()),
+            Pose::default(),
+        );
+        let effects = &robot_cfg.effects;
+        if let Some(l) = &effects.latency {
+            interp.set_lead(l.latency_s);
+        }
+        let mut driver = DriverStep::new(drive, sensor, period_s);
+        driver.set_frame_correction(effects.frame.clone());
         Ok(InProcessChain::new(
-            InterpolatorStep::new(
-                PlannerSource::new(robot.clone(), MotionLimits::default()),
-                Pose::default(),
-            ),
+            interp,
             IkStep::new(robot),
-            DriverStep::new(drive, sensor, period_s),
+            driver,
             CorrectionStep::pass_through(),
             period_s,
         ))

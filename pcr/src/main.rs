@@ -14,6 +14,7 @@ mod kin;
 mod plan;
 mod plant;
 mod profile;
+mod residuals;
 
 /// Offline tools for the 3-FbRR planar parallel continuum robot.
 #[derive(Parser)]
@@ -43,6 +44,9 @@ enum Command {
     /// Evaluate recordings: ISO 9283 repeatability and pose accuracy, path accuracy (Table II),
     /// gear backlash and the eq. 10 error map.
     Evaluate(evaluate::Args),
+    /// Find what the calibrated model lacks: residuals, candidate effects, held-out attribution,
+    /// and the extended robot file.
+    Residuals(residuals::Args),
 }
 
 fn main() -> std::process::ExitCode {
@@ -63,6 +67,7 @@ fn main() -> std::process::ExitCode {
         Command::Plant(a) => plant::run(a),
         Command::Calibrate(a) => calibrate::run(a),
         Command::Evaluate(a) => evaluate::run(a),
+        Command::Residuals(a) => residuals::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

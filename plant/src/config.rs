@@ -2,6 +2,7 @@
 //!
 //! Units: mm, degrees, N, N mm, seconds, motor steps. Arrays of three hold one value per leg.
 
+use pcr_robot::RobotConfig;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -201,6 +202,12 @@ pub struct PlantConfig {
     /// Free text.
     #[serde(default)]
     pub name: String,
+    /// The robot drawing (nominal geometry and actuation) this plant deviates from: a robot
+    /// configuration file; the built-in nominal robot (= configs/robot.toml) when absent. It is
+    /// the plant's own, independent of the model that drives it (a calibrated robot file must
+    /// not move the true robot).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub nominal_robot: Option<String>,
     /// Seed of every random effect (same seed, same run).
     pub seed: u64,
     /// Statics.
@@ -228,6 +235,7 @@ impl PlantConfig {
     pub fn ideal() -> PlantConfig {
         PlantConfig {
             name: "ideal plant".into(),
+            nominal_robot: None,
             seed: 1,
             mechanics: Mechanics {
                 ei_n_mm2: 6.5e4,
@@ -347,6 +355,20 @@ impl PlantConfig {
             frame_dphi_deg: 1.7,
         };
         c
+    }
+
+    /// The robot drawing this plant deviates from (`nominal_robot`, or the built-in nominal
+    /// robot).
+    pub fn drawing(&self) -> Result<RobotConfig, PlantConfigError> {
+        match &self.nominal_robot {
+            None => Ok(RobotConfig::nominal()),
+            Some(p) => RobotConfig::load(p).map_err(|e| PlantConfigError::Invalid {
+                path: self.name.clone(),
+                key: "nominal_robot".into(),
+                value: p.clone(),
+                reason: e.to_string(),
+            }),
+        }
     }
 
     /// Reads and validates a configuration file.

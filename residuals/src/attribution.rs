@@ -32,8 +32,8 @@ pub struct Options {
 impl Default for Options {
     fn default() -> Self {
         Options {
-            alpha: 1e-3,
-            min_effect_mm: 0.02,
+            alpha: 1e-2,
+            min_effect_mm: 0.01,
             max_rounds: 6,
             candidates: candidates::NAMES.iter().map(|s| s.to_string()).collect(),
         }
@@ -53,8 +53,13 @@ pub struct Score {
     pub held_out_rms_before_mm: f64,
     /// With the candidate, mm.
     pub held_out_rms_after_mm: f64,
-    /// sqrt of the held-out mean-square reduction, mm (negative: it made things worse).
+    /// sqrt of the held-out mean-square reduction against the reference, mm (negative: it made
+    /// things worse). The reference of `geometry` is the model as it is; that of every effect is
+    /// the recalibration (`geometry`), so an effect is credited only with what it adds to it.
     pub effect_mm: f64,
+    /// sqrt of the held-out mean-square reduction against the model as it is, mm: ranks the
+    /// significant candidates.
+    pub total_gain_mm: f64,
     /// One-sided p-value of the paired held-out block test.
     pub p_value: f64,
     /// BIC(candidate) - BIC(reference) on the training rows.
@@ -171,6 +176,85 @@ fn paired_p(a: &[f64], b: &[f64], held: &[bool]) -> f64 {
     1.0 - dist.cdf(t)
 }
 
+fn mark(scores: &mut [Score], round: usize, name: &str, note: String) {
+    if let Some(last) = scores
+        .iter_mut()
+        .rev()
+        .find(|x| x.name == name && x.round == round)
+    {
+        last.significant = false;
+        last.note = note;
+    }
+}
+
+/// Puts an accepted candidate into the model for real: the linearised change, damped until the
+/// full model lowers the training error, re-linearised and refitted (Gauss-Newton) while that
+/// helps, then every effect's parameters refined together on the full model. `None` when the
+/// full model does not improve on the training rows.
+fn accept<'a>(
+    config: &RobotConfig,
+    ctx: &Context<'a>,
+    first: Fitted,
+    series: &'a [Series],
+    blocks: &Blocks,
+    w_phi: f64,
+) -> Option<(RobotConfig, Context<'a>)> {
+    let name = first.name;
+    let start_sse = ctx.sse(&ctx.train(), None);
+    let mut cur: Option<(RobotConfig, Context<'a>, f64)> = None;
+    let mut step = Some(first);
+    for it in 0..4 {
+        let Some(f) = step.take() else { break };
+        let (base_cfg, base_sse) = match &cur {
+            Some((c, _, s)) => (c.clone(), *s),
+            None => (config.clone(), start_sse),
+        };
+        let mut full = base_cfg.clone();
+        (f.change)(&mut full);
+        let mut improved = false;
+        for frac in [1.0, 0.5, 0.25, 0.125] {
+            let cand = crate::model::blend(&base_cfg, &full, frac);
+            if cand.validate("extended robot").is_err() {
+                continue;
+            }
+            let Ok(model) = ExtendedModel::new(&cand) else {
+                continue;
+            };
+            let nctx = Context::new(series, model, blocks, w_phi);
+            if nctx.rows.len() + 5 < ctx.rows.len() {
+                continue;
+            }
+            let sse = nctx.sse(&nctx.train(), None);
+            if sse < base_sse {
+                cur = Some((cand, nctx, sse));
+                improved = true;
+                break;
+            }
+        }
+        if !improved || !candidates::iterable(name) || it == 3 {
+            break;
+        }
+        let (_, c, s) = cur.as_ref()?;
+        // Stop when the step gained less than 0.1 %.
+        if *s > 0.999 * base_sse {
+            break;
+        }
+        step = candidates::fit(name, c, &c.train());
+    }
+    let (cfg, nctx, sse) = cur?;
+    // Every effect's parameters together on the full model.
+    let refined = crate::refine::refine(&cfg, series, blocks, w_phi, 3000);
+    if refined != cfg {
+        if let Ok(model) = ExtendedModel::new(&refined) {
+            let rctx = Context::new(series, model, blocks, w_phi);
+            if rctx.rows.len() + 5 >= ctx.rows.len() && rctx.sse(&rctx.train(), None) < sse {
+                return Some((refined, rctx));
+            }
+        }
+    }
+    Some((cfg, nctx))
+}
+
 fn rms(sse: f64, n: usize) -> f64 {
     (sse / n.max(1) as f64).sqrt()
 }
@@ -191,6 +275,7 @@ fn score(
     n_candidates: usize,
 ) -> Score {
     let nb = blocks.len();
+    let raw: f64 = sse_per_block(ctx, test, None, nb).iter().sum();
     let a = sse_per_block(ctx, test, reference, nb);
     let b = sse_per_block(ctx, test, Some(&f.delta), nb);
     let (sa, sb): (f64, f64) = (a.iter().sum(), b.iter().sum());
@@ -224,11 +309,29 @@ fn score(
         held_out_rms_before_mm: rms(sa, test.len()),
         held_out_rms_after_mm: rms(sb, test.len()),
         effect_mm,
+        total_gain_mm: {
+            let t = (raw - sb) / test.len().max(1) as f64;
+            t.signum() * t.abs().sqrt()
+        },
         p_value: p,
         delta_bic,
         significant: note.is_empty(),
         note: note.join("; "),
     }
+}
+
+/// The residuals and features of a robot file on the series (no fitting): what `pcr residuals`
+/// writes as `residuals.csv`.
+pub fn residual_table(
+    robot: &RobotConfig,
+    series: &[Series],
+    blocks: &Blocks,
+    out: &mut dyn std::io::Write,
+) -> Result<(), AttributionError> {
+    let w_phi = robot.legs.iter().map(|l| l.r_p_mm).sum::<f64>() / 3.0;
+    let ctx = Context::new(series, ExtendedModel::new(robot)?, blocks, w_phi);
+    let feats = Features::of(&ctx);
+    features::write_csv(&ctx, &feats, out).map_err(|e| AttributionError::Data(e.to_string()))
 }
 
 /// Runs the attribution: starting from `start` (the calibrated robot), on `series` with
@@ -278,6 +381,13 @@ pub fn attribute(
             let Some(f) = fitted else {
                 continue;
             };
+            // A linearised change of more than 20 mm on a row is outside the linearisation.
+            if f.delta
+                .iter()
+                .any(|d| !(d[0].hypot(d[1]) < 20.0 && d[2].abs() < 20.0))
+            {
+                continue;
+            }
             let s = if f.name == "geometry" {
                 score(
                     round,
@@ -311,41 +421,40 @@ pub fn attribute(
             fits.push((f, s));
         }
         // The best significant candidate whose full model confirms the gain.
-        fits.sort_by(|a, b| b.1.effect_mm.total_cmp(&a.1.effect_mm));
+        fits.sort_by(|a, b| b.1.total_gain_mm.total_cmp(&a.1.total_gain_mm));
         let mut accepted = false;
         for (f, s) in fits.into_iter().filter(|(_, s)| s.significant) {
-            let mut next = config.clone();
-            (f.change)(&mut next);
-            if next.validate("extended robot").is_err() {
-                continue;
-            }
-            let Ok(model) = ExtendedModel::new(&next) else {
+            let name = f.name;
+            let Some((next, nctx)) = accept(&config, &ctx, f, series, blocks, w_phi) else {
+                mark(
+                    &mut scores,
+                    round,
+                    name,
+                    "the full model does not lower the training error".into(),
+                );
                 continue;
             };
-            let nctx = Context::new(series, model, blocks, w_phi);
             let ntest = nctx.test();
             let old = ctx.sse(&test, None) / test.len() as f64;
             let new = nctx.sse(&ntest, None) / ntest.len().max(1) as f64;
-            // The full model must keep at least half the linearised gain.
+            // The full model must keep at least half the linearised held-out gain.
             let target = s.held_out_rms_after_mm.powi(2);
-            if ntest.len() + 5 < test.len() || old - new < 0.5 * (old - target) || new >= old {
-                if let Some(last) = scores
-                    .iter_mut()
-                    .rev()
-                    .find(|x| x.name == s.name && x.round == round)
-                {
-                    last.significant = false;
-                    last.note = format!(
+            if ntest.len() + 5 < test.len() || new >= old || old - new < 0.5 * (old - target) {
+                mark(
+                    &mut scores,
+                    round,
+                    name,
+                    format!(
                         "the full model does not confirm the gain (held-out mean square {old:.5} -> {new:.5} mm^2, linearised {target:.5})"
-                    );
-                }
+                    ),
+                );
                 continue;
             }
-            used.push(f.name.to_string());
+            used.push(name.to_string());
             added.push(Added {
-                name: f.name.to_string(),
-                description: candidates::describe(f.name).to_string(),
-                params: f.params.clone(),
+                name: name.to_string(),
+                description: candidates::describe(name).to_string(),
+                params: s.params.clone(),
                 evidence: s.clone(),
                 held_out_after: Errors::of(&nctx, &ntest),
             });

@@ -14,7 +14,8 @@
 //! | `backlash` | gear backlash / friction hysteresis: play on each motor | play b_i, steps |
 //! | `latency` | command-to-motion latency | tau, s |
 //! | `creep` | slow drift: tendon creep, first-order in time | gain_i, time constant T s |
-//! | `compliance` | kineto-static: external wrench and joint springs bend the segments | F_x, F_y N, M N mm, k_M, k_P N mm/rad |
+//! | `joint_springs` | compliance under the coupling forces: springs in the passive joints bend the segments (kineto-static) | k_M, k_P N mm/rad |
+//! | `external_load` | compliance under an external load: a constant wrench on the platform | F_x, F_y N, M N mm |
 //! | `frame` | capture-frame misregistration | dx, dy mm, dphi deg |
 //! | `tendon_map` | remaining tendon-map nonlinearity | a richer Table I function per leg |
 //! | `geometry` | remaining geometric error (recalibration on every row) | the calibration parameters |
@@ -22,7 +23,6 @@
 
 use crate::context::Context;
 use crate::linear::{self, motor_delta, Columns, Nuisance};
-use crate::model::{play, steps_at};
 use pcr_kinematics::statics::Loads;
 use pcr_kinematics::TendonMap;
 use pcr_robot::effects::{Backlash, Compliance, Creep, FrameCorrection, Latency, Periodic};
@@ -75,14 +75,15 @@ pub struct Fitted {
 }
 
 /// The names of the candidates, in the order they are tried.
-pub const NAMES: [&str; 8] = [
+pub const NAMES: [&str; 9] = [
     "geometry",
     "tendon_map",
     "frame",
     "latency",
     "backlash",
     "creep",
-    "compliance",
+    "joint_springs",
+    "external_load",
     "periodic",
 ];
 
@@ -92,7 +93,8 @@ pub fn describe(name: &str) -> &'static str {
         "backlash" => "gear backlash / friction hysteresis: the output follows each motor through a play",
         "latency" => "command-to-motion latency: the motion lags the command",
         "creep" => "slow drift: tendon creep, elongation toward a share of the displacement with a time constant",
-        "compliance" => "kineto-static compliance: an external wrench and joint springs bend the segments",
+        "joint_springs" => "compliance under the coupling forces: springs in the passive joints bend the segments (kineto-static)",
+        "external_load" => "compliance under an external load: a constant wrench on the platform bends the segments (kineto-static)",
         "frame" => "capture-frame misregistration: a rigid transform between the measured and the robot frame",
         "tendon_map" => "remaining tendon-map nonlinearity: a richer function of the tendon displacement",
         "geometry" => "remaining geometric error: the calibration parameters refitted on every row",
@@ -182,10 +184,21 @@ pub fn frame(ctx: &Context, train: &[usize]) -> Option<Fitted> {
         c[2] = [m[1], -m[0], -ctx.w_phi];
     };
     let (fit, delta) = fit_joint(ctx, &nui, train, 3, &effect, None)?;
+    let prev = ctx
+        .model
+        .config
+        .effects
+        .frame
+        .clone()
+        .unwrap_or(FrameCorrection {
+            dx_mm: 0.0,
+            dy_mm: 0.0,
+            dphi_deg: 0.0,
+        });
     let f = FrameCorrection {
-        dx_mm: fit.x[0],
-        dy_mm: fit.x[1],
-        dphi_deg: fit.x[2].to_degrees(),
+        dx_mm: prev.dx_mm + fit.x[0],
+        dy_mm: prev.dy_mm + fit.x[1],
+        dphi_deg: prev.dphi_deg + fit.x[2].to_degrees(),
     };
     let params = vec![
         est("dx", f.dx_mm, Some(fit.std[0]), "mm"),
@@ -257,20 +270,38 @@ fn profile_std(sse: f64, n: usize, curv: Option<f64>) -> Option<f64> {
     curv.map(|c| (2.0 * s2 / c).sqrt())
 }
 
+/// The change of every measured row's predicted pose when the motor-side effects of the model
+/// are replaced by `effects` (latency, periodic errors, backlash, in the model's chain order).
+fn motor_side_delta(ctx: &Context, effects: &pcr_robot::effects::Effects) -> Vec<[f64; 3]> {
+    let q_new: Vec<Vec<[f64; 3]>> = ctx
+        .series
+        .iter()
+        .map(|s| {
+            crate::model::effective_steps(
+                s,
+                effects.latency.as_ref(),
+                &effects.periodic,
+                effects.backlash.as_ref(),
+            )
+        })
+        .collect();
+    ctx.rows
+        .iter()
+        .enumerate()
+        .map(|(i, row)| {
+            let q = ctx.pred(row).q_eff;
+            let o = q_new[row.s][row.k];
+            motor_delta(ctx, i, [o[0] - q[0], o[1] - q[1], o[2] - q[2]])
+        })
+        .collect()
+}
+
 /// `latency`: the motion lags the command by tau.
 pub fn latency(ctx: &Context, train: &[usize]) -> Option<Fitted> {
     let shift = |tau: f64| -> Vec<[f64; 3]> {
-        ctx.rows
-            .iter()
-            .enumerate()
-            .map(|(i, row)| {
-                let s = &ctx.series[row.s];
-                let t = s.samples[row.k].t_s;
-                let a = steps_at(s, t - tau);
-                let q = s.samples[row.k].q;
-                motor_delta(ctx, i, [a[0] - q[0], a[1] - q[1], a[2] - q[2]])
-            })
-            .collect()
+        let mut e = ctx.model.config.effects.clone();
+        e.latency = Some(Latency { latency_s: tau });
+        motor_side_delta(ctx, &e)
     };
     let grid: Vec<f64> = (0..=60).map(|k| -0.1 + 0.01 * k as f64).collect();
     let (tau, sse, curv) = minimise_1d(&mut |t| sse_of(ctx, train, &shift(t)), &grid);
@@ -294,37 +325,10 @@ pub fn latency(ctx: &Context, train: &[usize]) -> Option<Fitted> {
 
 /// `backlash`: play of b_i steps on each motor.
 pub fn backlash(ctx: &Context, train: &[usize]) -> Option<Fitted> {
-    // The play output of every series and motor for a width.
-    let plays = |b: [f64; 3]| -> Vec<Vec<[f64; 3]>> {
-        ctx.series
-            .iter()
-            .map(|s| {
-                let mut out: Vec<[f64; 3]> = s.samples.iter().map(|x| x.q).collect();
-                for i in 0..3 {
-                    if b[i] == 0.0 {
-                        continue;
-                    }
-                    let col: Vec<f64> = s.samples.iter().map(|x| x.q[i]).collect();
-                    let start = col.first().copied().unwrap_or(0.0);
-                    for (o, v) in out.iter_mut().zip(play(&col, b[i], start)) {
-                        o[i] = v;
-                    }
-                }
-                out
-            })
-            .collect()
-    };
     let delta_of = |b: [f64; 3]| -> Vec<[f64; 3]> {
-        let p = plays(b);
-        ctx.rows
-            .iter()
-            .enumerate()
-            .map(|(i, row)| {
-                let q = ctx.series[row.s].samples[row.k].q;
-                let o = p[row.s][row.k];
-                motor_delta(ctx, i, [o[0] - q[0], o[1] - q[1], o[2] - q[2]])
-            })
-            .collect()
+        let mut e = ctx.model.config.effects.clone();
+        e.backlash = Some(Backlash { steps: b });
+        motor_side_delta(ctx, &e)
     };
     let grid: Vec<f64> = (0..=40).map(|k| 0.5 * k as f64).collect();
     let mut b = [0.0; 3];
@@ -444,9 +448,9 @@ pub fn creep(ctx: &Context, train: &[usize]) -> Option<Fitted> {
     })
 }
 
-/// `compliance`: an external wrench and joint springs bend the segments (EI from the robot file
-/// or [`DEFAULT_EI`]).
-pub fn compliance(ctx: &Context, train: &[usize]) -> Option<Fitted> {
+/// The kineto-static candidates: `which` selects the load parameters freed (indices into
+/// force x, force y, couple, k_M, k_P). EI comes from the robot file or [`DEFAULT_EI`].
+fn loaded(ctx: &Context, train: &[usize], name: &'static str, which: &[usize]) -> Option<Fitted> {
     let base = ctx
         .model
         .config
@@ -461,8 +465,7 @@ pub fn compliance(ctx: &Context, train: &[usize]) -> Option<Fitted> {
             k_p_n_mm_per_rad: 0.0,
         });
     let loads = Loads::from_compliance(&base);
-    // Per-row responses to the five load parameters (scaled to per N, per 100 N mm, per
-    // 100 N mm/rad for conditioning).
+    // Per-row responses (per N, per 100 N mm, per 100 N mm/rad for conditioning).
     let scale = [1.0, 1.0, 100.0, 100.0, 100.0];
     let resp: Vec<[[f64; 3]; 5]> = ctx
         .rows
@@ -479,10 +482,11 @@ pub fn compliance(ctx: &Context, train: &[usize]) -> Option<Fitted> {
                 .unwrap_or([[0.0; 3]; 5])
         })
         .collect();
+    let n_e = which.len();
     let effect = |i: usize, c: &mut Columns| {
-        for j in 0..5 {
+        for (a, &j) in which.iter().enumerate() {
             let r = resp[i][j];
-            c[j] = [
+            c[a] = [
                 r[0] * scale[j],
                 r[1] * scale[j],
                 r[2] * scale[j] * ctx.w_phi,
@@ -490,9 +494,13 @@ pub fn compliance(ctx: &Context, train: &[usize]) -> Option<Fitted> {
         }
     };
     let nui = Nuisance::of(ctx);
-    let (fit, delta) = fit_joint(ctx, &nui, train, 5, &effect, None)?;
-    let v: Vec<f64> = (0..5).map(|j| fit.x[j] * scale[j]).collect();
-    let s: Vec<f64> = (0..5).map(|j| fit.std[j] * scale[j]).collect();
+    let (fit, delta) = fit_joint(ctx, &nui, train, n_e, &effect, None)?;
+    let mut v = [0.0; 5];
+    let mut sd = [None; 5];
+    for (a, &j) in which.iter().enumerate() {
+        v[j] = fit.x[a] * scale[j];
+        sd[j] = Some(fit.std[a] * scale[j]);
+    }
     let new = Compliance {
         ei_n_mm2: base.ei_n_mm2,
         force_n: [base.force_n[0] + v[0], base.force_n[1] + v[1]],
@@ -500,19 +508,23 @@ pub fn compliance(ctx: &Context, train: &[usize]) -> Option<Fitted> {
         k_m_n_mm_per_rad: base.k_m_n_mm_per_rad + v[3],
         k_p_n_mm_per_rad: base.k_p_n_mm_per_rad + v[4],
     };
-    let params = vec![
-        est("force x", new.force_n[0], Some(s[0]), "N"),
-        est("force y", new.force_n[1], Some(s[1]), "N"),
-        est("couple", new.couple_n_mm, Some(s[2]), "N mm"),
-        est("k_M", new.k_m_n_mm_per_rad, Some(s[3]), "N mm/rad"),
-        est("k_P", new.k_p_n_mm_per_rad, Some(s[4]), "N mm/rad"),
-        est("EI (assumed)", new.ei_n_mm2, None, "N mm^2"),
+    let all = [
+        ("force x", new.force_n[0], "N"),
+        ("force y", new.force_n[1], "N"),
+        ("couple", new.couple_n_mm, "N mm"),
+        ("k_M", new.k_m_n_mm_per_rad, "N mm/rad"),
+        ("k_P", new.k_p_n_mm_per_rad, "N mm/rad"),
     ];
-    let nuis = nuisance_change(nui, fit.x.clone(), 5);
+    let mut params: Vec<Estimate> = which
+        .iter()
+        .map(|&j| est(all[j].0, all[j].1, sd[j], all[j].2))
+        .collect();
+    params.push(est("EI (assumed)", new.ei_n_mm2, None, "N mm^2"));
+    let nuis = nuisance_change(nui, fit.x.clone(), n_e);
     Some(Fitted {
-        name: "compliance",
+        name,
         params,
-        k: 5,
+        k: n_e,
         delta,
         train_sse: fit.sse,
         change: Box::new(move |c| {
@@ -520,6 +532,17 @@ pub fn compliance(ctx: &Context, train: &[usize]) -> Option<Fitted> {
             nuis(c);
         }),
     })
+}
+
+/// `joint_springs`: springs in the passive joints (relaxed at home) bend the segments through
+/// the link forces (kineto-static).
+pub fn joint_springs(ctx: &Context, train: &[usize]) -> Option<Fitted> {
+    loaded(ctx, train, "joint_springs", &[3, 4])
+}
+
+/// `external_load`: a constant wrench on the platform bends the segments (kineto-static).
+pub fn external_load(ctx: &Context, train: &[usize]) -> Option<Fitted> {
+    loaded(ctx, train, "external_load", &[0, 1, 2])
 }
 
 /// `tendon_map`: a richer function of the tendon displacement per leg: the current map plus a
@@ -751,6 +774,12 @@ pub fn periodic(ctx: &Context, train: &[usize]) -> Option<Fitted> {
     })
 }
 
+/// Whether re-running a candidate on a model that already holds its effect refines it (a
+/// Gauss-Newton step); `creep` and `periodic` are fitted once.
+pub fn iterable(name: &str) -> bool {
+    !matches!(name, "creep" | "periodic")
+}
+
 /// Fits the candidate `name`.
 pub fn fit(name: &str, ctx: &Context, train: &[usize]) -> Option<Fitted> {
     match name {
@@ -760,7 +789,8 @@ pub fn fit(name: &str, ctx: &Context, train: &[usize]) -> Option<Fitted> {
         "latency" => latency(ctx, train),
         "backlash" => backlash(ctx, train),
         "creep" => creep(ctx, train),
-        "compliance" => compliance(ctx, train),
+        "joint_springs" => joint_springs(ctx, train),
+        "external_load" => external_load(ctx, train),
         "periodic" => periodic(ctx, train),
         _ => None,
     }

@@ -252,3 +252,36 @@ pub fn links(ctx: &Context, feats: &Features, train: &[usize], test: &[usize]) -
     out.sort_by(|a, b| b.held_out_r2.total_cmp(&a.held_out_r2));
     out
 }
+
+/// Writes every measured row's residual (x, y mm; phi deg) beside its features as CSV: the
+/// table a lab studies when the verdict is `unexplained`.
+pub fn write_csv(
+    ctx: &Context,
+    feats: &Features,
+    out: &mut dyn std::io::Write,
+) -> std::io::Result<()> {
+    write!(out, "file,t_s,block,held_out,rx_mm,ry_mm,rphi_deg")?;
+    for n in &feats.names {
+        write!(out, ",{n}")?;
+    }
+    writeln!(out)?;
+    for (row, f) in ctx.rows.iter().zip(&feats.values) {
+        let s = &ctx.series[row.s];
+        write!(
+            out,
+            "{},{},{},{},{:.5},{:.5},{:.5}",
+            s.origin.replace(',', "_"),
+            s.samples[row.k].t_s,
+            row.block,
+            u8::from(row.held_out),
+            row.r[0],
+            row.r[1],
+            (row.r[2] / ctx.w_phi).to_degrees()
+        )?;
+        for v in f {
+            write!(out, ",{v:.6}")?;
+        }
+        writeln!(out)?;
+    }
+    Ok(())
+}

@@ -12,6 +12,7 @@ pub mod context;
 pub mod features;
 pub mod linear;
 pub mod model;
+pub mod refine;
 pub mod series;
 
 pub use attribution::{attribute, Attribution, Options, Verdict};

@@ -16,7 +16,7 @@ use crate::series::Series;
 use nalgebra::Matrix3;
 use pcr_kinematics::statics::Loads;
 use pcr_kinematics::{Pose, Robot};
-use pcr_robot::effects::{Backlash, Creep, Effects, FrameCorrection, Latency, Periodic};
+use pcr_robot::effects::{Backlash, Creep, Effects, Latency, Periodic};
 use pcr_robot::RobotConfig;
 
 /// The prediction for one row.
@@ -74,6 +74,12 @@ impl ExtendedModel {
 
     /// Predictions for every row of a series.
     pub fn predict(&self, s: &Series) -> Vec<Prediction> {
+        self.predict_where(s, &|_| true)
+    }
+
+    /// Predictions for every row of a series; the pose (forward kinematics) only where `want`
+    /// says so (the histories of latency, backlash and creep always run over every row).
+    pub fn predict_where(&self, s: &Series, want: &dyn Fn(usize) -> bool) -> Vec<Prediction> {
         let e = &self.config.effects;
         let q_eff = effective_steps(s, e.latency.as_ref(), &e.periodic, e.backlash.as_ref());
         let mmps: [f64; 3] = std::array::from_fn(|i| self.config.legs[i].actuation.mm_per_step());
@@ -98,6 +104,17 @@ impl ExtendedModel {
             if let Some(p) = smp.pose {
                 guess = Pose::new(p[0], p[1], p[2]);
             }
+            if !want(k) {
+                out.push(Prediction {
+                    pose: None,
+                    q_eff: q_eff[k],
+                    dl_eff: dl_eff[k],
+                    kappa,
+                    j_q: Matrix3::zeros(),
+                    j_kappa: Matrix3::zeros(),
+                });
+                continue;
+            }
             let pose = match &self.loads {
                 Some(l) => self.robot.fk_loaded(&kappa, l, &guess).ok().map(|e| e.pose),
                 None => self.robot.fk_warm(&kappa, &guess).ok(),
@@ -111,7 +128,12 @@ impl ExtendedModel {
                             .unwrap_or_else(Matrix3::zeros);
                         let d = Matrix3::from_diagonal(&nalgebra::Vector3::from(
                             std::array::from_fn::<f64, 3, _>(|i| {
-                                self.robot.legs[i].map.kappa_and_slope(dl_eff[k][i]).1 * mmps[i]
+                                // The slope over one motor step: the root maps' slope is
+                                // infinite at dl = 0, a step is the smallest change there is.
+                                let m = &self.robot.legs[i].map;
+                                let h = 0.5 * mmps[i];
+                                let dl = dl_eff[k][i];
+                                (m.kappa(dl + h) - m.kappa(dl - h)) / (2.0 * h) * mmps[i]
                             }),
                         ));
                         (jk * d, jk)
@@ -136,21 +158,10 @@ impl ExtendedModel {
     /// The measured pose of a row with the frame correction applied.
     pub fn corrected(&self, m: [f64; 3]) -> [f64; 3] {
         match &self.config.effects.frame {
-            Some(f) => apply_frame(f, m),
+            Some(f) => f.apply(m),
             None => m,
         }
     }
-}
-
-/// R(dphi) p + d on a pose (x mm, y mm, phi rad).
-pub fn apply_frame(f: &FrameCorrection, m: [f64; 3]) -> [f64; 3] {
-    let a = f.dphi_deg.to_radians();
-    let (s, c) = a.sin_cos();
-    [
-        c * m[0] - s * m[1] + f.dx_mm,
-        s * m[0] + c * m[1] + f.dy_mm,
-        m[2] + a,
-    ]
 }
 
 /// The commanded motor positions of a series interpolated at time `t`.
@@ -245,4 +256,83 @@ mod tests {
         let out = play(&[0.0, 1.0, 3.0, 2.0, 1.0, 0.0, 3.0], 2.0, 0.0);
         assert_eq!(out, vec![0.0, 0.0, 2.0, 2.0, 2.0, 1.0, 2.0]);
     }
+}
+
+/// The configuration a fraction `s` of the way from `old` to `new`: every continuous parameter
+/// (leg geometry, map coefficients of the same family, effect parameters; an effect absent from
+/// `old` counts as zero) interpolated; structural differences (another map family, other
+/// periodic terms) taken from `new`. Used to damp a linearised step.
+pub fn blend(old: &RobotConfig, new: &RobotConfig, s: f64) -> RobotConfig {
+    let lerp = |a: f64, b: f64| a + s * (b - a);
+    let mut out = new.clone();
+    for (o, (a, b)) in out.legs.iter_mut().zip(old.legs.iter().zip(&new.legs)) {
+        o.r_base_mm = lerp(a.r_base_mm, b.r_base_mm);
+        o.beta_deg = lerp(a.beta_deg, b.beta_deg);
+        o.psi_deg = lerp(a.psi_deg, b.psi_deg);
+        o.l_c_mm = lerp(a.l_c_mm, b.l_c_mm);
+        o.l_ce_mm = lerp(a.l_ce_mm, b.l_ce_mm);
+        o.l_st_mm = lerp(a.l_st_mm, b.l_st_mm);
+        o.r_p_mm = lerp(a.r_p_mm, b.r_p_mm);
+        o.theta_p_deg = lerp(a.theta_p_deg, b.theta_p_deg);
+        if a.tendon_map.model == b.tendon_map.model
+            && a.tendon_map.coeffs.len() == b.tendon_map.coeffs.len()
+        {
+            for (c, (x, y)) in o
+                .tendon_map
+                .coeffs
+                .iter_mut()
+                .zip(a.tendon_map.coeffs.iter().zip(&b.tendon_map.coeffs))
+            {
+                *c = lerp(*x, *y);
+            }
+        }
+    }
+    let (eo, en) = (&old.effects, &new.effects);
+    let e = &mut out.effects;
+    if let Some(l) = e.latency.as_mut() {
+        l.latency_s = lerp(
+            eo.latency.as_ref().map_or(0.0, |x| x.latency_s),
+            l.latency_s,
+        );
+    }
+    if let Some(b) = e.backlash.as_mut() {
+        let o = eo.backlash.as_ref().map_or([0.0; 3], |x| x.steps);
+        b.steps = std::array::from_fn(|i| lerp(o[i], b.steps[i]));
+    }
+    if let Some(c) = e.creep.as_mut() {
+        let o = eo.creep.as_ref().map_or([0.0; 3], |x| x.gain);
+        c.gain = std::array::from_fn(|i| lerp(o[i], c.gain[i]));
+        if let Some(oc) = &eo.creep {
+            c.time_constant_s = lerp(oc.time_constant_s, c.time_constant_s);
+        }
+    }
+    if let Some(c) = e.compliance.as_mut() {
+        let z = Default::default();
+        let o: &pcr_robot::effects::Compliance = eo.compliance.as_ref().unwrap_or(&z);
+        c.force_n = [
+            lerp(o.force_n[0], c.force_n[0]),
+            lerp(o.force_n[1], c.force_n[1]),
+        ];
+        c.couple_n_mm = lerp(o.couple_n_mm, c.couple_n_mm);
+        c.k_m_n_mm_per_rad = lerp(o.k_m_n_mm_per_rad, c.k_m_n_mm_per_rad);
+        c.k_p_n_mm_per_rad = lerp(o.k_p_n_mm_per_rad, c.k_p_n_mm_per_rad);
+    }
+    if let Some(f) = e.frame.as_mut() {
+        let z = pcr_robot::effects::FrameCorrection {
+            dx_mm: 0.0,
+            dy_mm: 0.0,
+            dphi_deg: 0.0,
+        };
+        let o = eo.frame.as_ref().unwrap_or(&z);
+        f.dx_mm = lerp(o.dx_mm, f.dx_mm);
+        f.dy_mm = lerp(o.dy_mm, f.dy_mm);
+        f.dphi_deg = lerp(o.dphi_deg, f.dphi_deg);
+    }
+    if eo.periodic.len() <= en.periodic.len() {
+        for (k, p) in e.periodic.iter_mut().enumerate() {
+            let a0 = eo.periodic.get(k).map_or(0.0, |x| x.amplitude_steps);
+            p.amplitude_steps = lerp(a0, p.amplitude_steps);
+        }
+    }
+    out
 }

@@ -43,7 +43,7 @@ pub struct Creep {
 /// Compliance: a kineto-static extension of the constant-curvature model (segments that bend
 /// under the link forces, with their total bending fixed by the tendons), loaded by an external
 /// wrench on the platform and by springs in the passive joints relaxed at the home pose.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Compliance {
     /// Bending stiffness of each segment, N mm^2.
@@ -73,6 +73,19 @@ pub struct FrameCorrection {
     pub dy_mm: f64,
     /// Rotation, degrees.
     pub dphi_deg: f64,
+}
+
+impl FrameCorrection {
+    /// A measured pose (x mm, y mm, phi rad) corrected: R(dphi) p + d, phi + dphi.
+    pub fn apply(&self, m: [f64; 3]) -> [f64; 3] {
+        let a = self.dphi_deg.to_radians();
+        let (s, c) = a.sin_cos();
+        [
+            c * m[0] - s * m[1] + self.dx_mm,
+            s * m[0] + c * m[1] + self.dy_mm,
+            m[2] + a,
+        ]
+    }
 }
 
 /// One periodic transmission error: the output of motor `motor` lags its position by

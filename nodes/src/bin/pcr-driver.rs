@@ -90,8 +90,10 @@ fn run(a: Args) -> Result<()> {
                 Some(p) => PlantConfig::load(p).with_context(|| format!("plant {p}"))?,
                 None => PlantConfig::prototype(),
             };
+            // The plant deviates from its own drawing, never from the model that drives it.
+            let drawing = plant_cfg.drawing().map_err(|e| anyhow!("plant: {e}"))?;
             let (mut drive, sensor) =
-                plant_backend(&robot_cfg, &plant_cfg).map_err(|e| anyhow!("plant: {e}"))?;
+                plant_backend(&drawing, &plant_cfg).map_err(|e| anyhow!("plant: {e}"))?;
             let home = drive.home_steps();
             let start = sim_start(&cn, home)?;
             if start != home {
@@ -100,7 +102,8 @@ fn run(a: Args) -> Result<()> {
                 bring_to(&mut drive, start, period)?;
             }
             let drv = safety_stack(drive, &robot, watchdog_s);
-            let step = DriverStep::new(drv, sensor, period);
+            let mut step = DriverStep::new(drv, sensor, period);
+            step.set_frame_correction(robot_cfg.effects.frame.clone());
             serve(c, cn, guard, step)
         }
         Backend::Fil => {
@@ -108,7 +111,8 @@ fn run(a: Args) -> Result<()> {
                 Some(p) => PlantConfig::load(p).with_context(|| format!("plant {p}"))?,
                 None => PlantConfig::prototype(),
             };
-            let fil = FirmwareInTheLoop::start(&robot_cfg, &plant_cfg, FilOptions::default())
+            let drawing = plant_cfg.drawing().map_err(|e| anyhow!("plant: {e}"))?;
+            let fil = FirmwareInTheLoop::start(&drawing, &plant_cfg, FilOptions::default())
                 .map_err(|e| anyhow!("firmware in the loop: {e}"))?;
             let frame = fil.plant().capture_model().frame;
             let last = std::rc::Rc::new(std::cell::Cell::new(None));
@@ -121,7 +125,8 @@ fn run(a: Args) -> Result<()> {
                 &robot,
                 watchdog_s,
             );
-            let step = DriverStep::new(drv, SharedPose { last }, period);
+            let mut step = DriverStep::new(drv, SharedPose { last }, period);
+            step.set_frame_correction(robot_cfg.effects.frame.clone());
             serve(c, cn, guard, step)
         }
         Backend::Serial => {

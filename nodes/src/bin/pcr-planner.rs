@@ -116,6 +116,9 @@ fn run(a: Args) -> Result<()> {
     pcr_nodes::realtime::apply(c.rt_priority, c.cpu, c.mlockall);
 
     let mut interp = InterpolatorStep::new(template, Pose::default());
+    if let Some(l) = &robot_cfg.effects.latency {
+        interp.set_lead(l.latency_s);
+    }
     // The run being planned on the worker thread, and runs whose plans are to be dropped
     // (stopped while planning).
     let mut planning: Option<u32> = None;

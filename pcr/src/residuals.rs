@@ -1,0 +1,201 @@
+//! `pcr residuals`: find what the calibrated model lacks, from recordings alone.
+//!
+//! `pcr residuals --robot R --data rec.csv [--data more.csv] [--holdout other.csv]
+//!  --report DIR --json out.json --out extended.toml [--no-calibrate]`
+
+use crate::calibrate::load_robot;
+use crate::clock::utc_now;
+use anyhow::{bail, Context as _};
+use pcr_calibration::calibrate::{self, Options as CalOptions};
+use pcr_calibration::StaticData;
+use pcr_recording::Recording;
+use pcr_residuals::{attribute, Blocks, Options, Series};
+use std::path::PathBuf;
+
+/// Arguments of `pcr residuals`.
+#[derive(clap::Args)]
+pub struct Args {
+    /// Robot configuration the recordings were made with; default: the built-in nominal robot.
+    #[arg(long, value_name = "ROBOT.toml")]
+    robot: Option<PathBuf>,
+    /// Recordings to analyse (repeatable). The first one with static poses calibrates the
+    /// robot first, as `pcr calibrate` does.
+    #[arg(long, value_name = "REC.csv", required = true)]
+    data: Vec<PathBuf>,
+    /// Recordings on which `before` and `after` are measured and nothing is fitted
+    /// (repeatable); without it, every third block of about `--block-s` of `--data` is held out.
+    #[arg(long, value_name = "REC.csv")]
+    holdout: Vec<PathBuf>,
+    /// Take the robot file as it is (no calibration first).
+    #[arg(long)]
+    no_calibrate: bool,
+    /// Length of the held-out time blocks, s.
+    #[arg(long, default_value_t = 4.0)]
+    block_s: f64,
+    /// Family-wise significance level of a round.
+    #[arg(long, default_value_t = 1e-3)]
+    alpha: f64,
+    /// Smallest held-out RMS gain worth claiming, mm.
+    #[arg(long, default_value_t = 0.01)]
+    min_effect_mm: f64,
+    /// Only these candidates (comma separated; default: all).
+    #[arg(long, value_delimiter = ',')]
+    candidates: Vec<String>,
+    /// The extended robot configuration to write.
+    #[arg(long, value_name = "EXTENDED.toml")]
+    out: Option<PathBuf>,
+    /// Everything as JSON.
+    #[arg(long, value_name = "OUT.json")]
+    json: Option<PathBuf>,
+    /// Folder for the Markdown report and its figures.
+    #[arg(long, value_name = "DIR")]
+    report: Option<PathBuf>,
+}
+
+fn read_all(paths: &[PathBuf]) -> anyhow::Result<Vec<(Recording, Series)>> {
+    paths
+        .iter()
+        .map(|p| {
+            let rec = Recording::read_path(p)?;
+            let s = Series::from_recording(&rec, &p.display().to_string())?;
+            Ok((rec, s))
+        })
+        .collect()
+}
+
+/// Runs `pcr residuals`.
+pub fn run(a: Args) -> anyhow::Result<()> {
+    if !(a.block_s > 0.0 && a.block_s.is_finite()) {
+        bail!(
+            "--block-s {}: must be a positive number of seconds",
+            a.block_s
+        );
+    }
+    if !(a.alpha > 0.0 && a.alpha < 1.0) {
+        bail!("--alpha {}: must be in (0, 1)", a.alpha);
+    }
+    for c in &a.candidates {
+        if !pcr_residuals::candidates::NAMES.contains(&c.as_str()) {
+            bail!(
+                "--candidates: unknown effect `{c}` (known: {})",
+                pcr_residuals::candidates::NAMES.join(", ")
+            );
+        }
+    }
+    let start = load_robot(a.robot.as_deref())?;
+    let data = read_all(&a.data)?;
+    let holdout = read_all(&a.holdout)?;
+    // Calibrate first on the static poses of the data (never of the holdout).
+    let robot = if a.no_calibrate {
+        start
+    } else {
+        let with_statics = data
+            .iter()
+            .find(|(r, _)| r.rows.iter().any(|x| x.settled == Some(true)));
+        match with_statics {
+            Some((rec, s)) => {
+                let sd = StaticData::from_recording(rec, &s.origin, 1, 1.0 / 3.0)?;
+                let cal = calibrate::calibrate_data(&start, &sd, &CalOptions::default()).context(
+                    "calibration before the residual analysis (--no-calibrate skips it)",
+                )?;
+                eprintln!(
+                    "calibrated on {}: function {}, platform position RMS on its test poses {:.3} mm",
+                    s.origin,
+                    cal.selected,
+                    cal.after.test.map_or(f64::NAN, |t| t.pose.position_rms_mm)
+                );
+                cal.robot
+            }
+            None => {
+                eprintln!("no static poses in --data: the robot file is used as it is");
+                start
+            }
+        }
+    };
+    let train: Vec<Series> = data.into_iter().map(|(_, s)| s).collect();
+    let test: Vec<Series> = holdout.into_iter().map(|(_, s)| s).collect();
+    let (series, blocks) = if test.is_empty() {
+        let b = Blocks::in_time(&train, a.block_s, 3);
+        (train, b)
+    } else {
+        let b = Blocks::by_series(&train, &test, a.block_s);
+        (train.into_iter().chain(test).collect::<Vec<_>>(), b)
+    };
+    let opts = Options {
+        alpha: a.alpha,
+        min_effect_mm: a.min_effect_mm,
+        candidates: if a.candidates.is_empty() {
+            Options::default().candidates
+        } else {
+            a.candidates.clone()
+        },
+        ..Options::default()
+    };
+    if let Some(dir) = &a.report {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        let p = dir.join("residuals_before.csv");
+        let mut f = std::io::BufWriter::new(
+            std::fs::File::create(&p).with_context(|| format!("cannot write {}", p.display()))?,
+        );
+        pcr_residuals::attribution::residual_table(&robot, &series, &blocks, &mut f)?;
+    }
+    let wall = std::time::Instant::now();
+    let res = attribute(&robot, &series, &blocks, &opts)?;
+    eprintln!("analysed in {:.2} s", wall.elapsed().as_secs_f64());
+    println!(
+        "held out: {} rows in {} blocks; before: position mean {:.3} / max {:.3} / RMS {:.3} mm, orientation RMS {:.3} deg",
+        res.rows[1], res.blocks[1], res.before.position_mean_mm, res.before.position_max_mm,
+        res.before.position_rms_mm, res.before.orientation_rms_deg
+    );
+    for e in &res.effects {
+        let p: Vec<String> = e
+            .params
+            .iter()
+            .map(|p| match p.std {
+                Some(s) => format!("{} = {:.4} +- {:.4} {}", p.name, p.value, s, p.unit),
+                None => format!("{} = {:.4} {}", p.name, p.value, p.unit),
+            })
+            .collect();
+        println!(
+            "added {}: {} (held-out gain {:.3} mm, p = {:.1e})",
+            e.name,
+            p.join(", "),
+            e.evidence.effect_mm,
+            e.evidence.p_value
+        );
+    }
+    println!(
+        "after: position mean {:.3} / max {:.3} / RMS {:.3} mm, orientation RMS {:.3} deg; verdict: {:?}",
+        res.after.position_mean_mm,
+        res.after.position_max_mm,
+        res.after.position_rms_mm,
+        res.after.orientation_rms_deg,
+        res.verdict
+    );
+    for f in &res.correlated_features {
+        println!(
+            "  remaining residual follows {} (held-out R^2 {:.2}, correlation {:+.2} with {})",
+            f.feature, f.held_out_r2, f.correlation, f.component
+        );
+    }
+    if let Some(o) = &a.out {
+        let text = format!(
+            "# Extended robot written by `pcr residuals` ({}): effects {}.\n{}",
+            utc_now(),
+            res.effects
+                .iter()
+                .map(|e| e.name.as_str())
+                .collect::<Vec<_>>()
+                .join(", "),
+            res.robot.to_toml_string()
+        );
+        std::fs::write(o, text).with_context(|| format!("cannot write {}", o.display()))?;
+        println!("extended robot: {}", o.display());
+    }
+    if let Some(j) = &a.json {
+        std::fs::write(j, serde_json::to_string_pretty(&res)?)
+            .with_context(|| format!("cannot write {}", j.display()))?;
+        println!("json: {}", j.display());
+    }
+    Ok(())
+}
