@@ -247,17 +247,6 @@ pub fn apply_creep(s: &Series, dl: &[[f64; 3]], c: &Creep) -> Vec<[f64; 3]> {
         .collect()
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn play_has_a_dead_band() {
-        let out = play(&[0.0, 1.0, 3.0, 2.0, 1.0, 0.0, 3.0], 2.0, 0.0);
-        assert_eq!(out, vec![0.0, 0.0, 2.0, 2.0, 2.0, 1.0, 2.0]);
-    }
-}
-
 /// The configuration a fraction `s` of the way from `old` to `new`: every continuous parameter
 /// (leg geometry, map coefficients of the same family, effect parameters; an effect absent from
 /// `old` counts as zero) interpolated; structural differences (another map family, other
@@ -335,4 +324,15 @@ pub fn blend(old: &RobotConfig, new: &RobotConfig, s: f64) -> RobotConfig {
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn play_has_a_dead_band() {
+        let out = play(&[0.0, 1.0, 3.0, 2.0, 1.0, 0.0, 3.0], 2.0, 0.0);
+        assert_eq!(out, vec![0.0, 0.0, 2.0, 2.0, 2.0, 1.0, 2.0]);
+    }
 }

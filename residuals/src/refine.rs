@@ -265,7 +265,7 @@ pub fn refine(
                 .filter(|(k, x)| x.pose.is_some() && !blocks.held_out[blocks.block[si][*k]])
                 .filter_map(|(k, _)| {
                     count += 1;
-                    (count % every == 0).then_some(k)
+                    count.is_multiple_of(every).then_some(k)
                 })
                 .collect()
         })
