@@ -35,7 +35,7 @@ pub fn plant_backend(
     cfg: &PlantConfig,
 ) -> Result<(PlantDrive, PlantSensor), PlantError> {
     let plant = Plant::new(robot, cfg)?;
-    let frame = plant.capture_model().frame;
+    let frame = plant.capture_model().registered;
     let last = Rc::new(Cell::new(None));
     Ok((
         PlantDrive {

@@ -438,7 +438,7 @@ fn run_series(
     );
     let mut w = RecordingWriter::create(output, &meta, &known, &RUN_EXTRA)
         .with_context(|| format!("cannot create {}", output.display()))?;
-    let frame = plant.capture_model().frame;
+    let frame = plant.capture_model().registered;
     let mut last_meas = None;
     let mut faults = 0usize;
     for (k, (t, q, line, base)) in setpoints.iter().enumerate() {

@@ -67,6 +67,10 @@ impl Measurement {
 pub struct CaptureModel {
     /// Capture frame.
     pub frame: Frame,
+    /// The capture frame as the measuring side registered it (the true one unless the
+    /// configuration declares a registration error): measurements are mapped into the robot
+    /// frame with this one.
+    pub registered: Frame,
     /// Noise sigma of positions (mm) and angle (rad); zero when off.
     pub sigma: (f64, f64),
     /// Dropout probability per body and sample.
@@ -84,6 +88,13 @@ impl CaptureModel {
             frame: Frame {
                 d: [c.frame_dx_mm, c.frame_dy_mm],
                 dphi: c.frame_dphi_deg.to_radians(),
+            },
+            registered: Frame {
+                d: [
+                    c.frame_dx_mm + c.registration_error_dx_mm,
+                    c.frame_dy_mm + c.registration_error_dy_mm,
+                ],
+                dphi: (c.frame_dphi_deg + c.registration_error_dphi_deg).to_radians(),
             },
             sigma: if c.noise {
                 (c.sigma_mm, c.sigma_deg.to_radians())

@@ -111,6 +111,12 @@ pub struct TrueTendonMap {
     pub dl0_mm: [f64; 3],
     /// Saturation bending phi_sat of the `tanh` model, degrees (unused by `linear`).
     pub phi_sat_deg: [f64; 3],
+    /// Tendon cross-coupling (default 0 = off): the tendon of leg i runs over the roll of leg
+    /// i-1 (cyclic) and is pulled by this share of that leg's displacement as well. A coupling
+    /// between legs the constant-curvature model and the residual tools' library deliberately
+    /// lack.
+    #[serde(default)]
+    pub cross_coupling: f64,
 }
 
 /// Stepper and gear effects.
@@ -183,6 +189,16 @@ pub struct Capture {
     pub frame_dy_mm: f64,
     /// Rotation of the capture frame, degrees.
     pub frame_dphi_deg: f64,
+    /// Misregistration: the capture-to-robot transform the measuring side uses is the true one
+    /// off by this much (x offset, mm; default 0 = perfectly registered).
+    #[serde(default)]
+    pub registration_error_dx_mm: f64,
+    /// Misregistration, y offset, mm.
+    #[serde(default)]
+    pub registration_error_dy_mm: f64,
+    /// Misregistration, rotation, degrees.
+    #[serde(default)]
+    pub registration_error_dphi_deg: f64,
 }
 
 /// Time integration.
@@ -260,6 +276,7 @@ impl PlantConfig {
                 gain: [1.0; 3],
                 dl0_mm: [0.0; 3],
                 phi_sat_deg: [360.0; 3],
+                cross_coupling: 0.0,
             },
             stepper: Stepper {
                 rate_limit: false,
@@ -292,6 +309,9 @@ impl PlantConfig {
                 frame_dx_mm: 0.0,
                 frame_dy_mm: 0.0,
                 frame_dphi_deg: 0.0,
+                registration_error_dx_mm: 0.0,
+                registration_error_dy_mm: 0.0,
+                registration_error_dphi_deg: 0.0,
             },
             simulation: Simulation {
                 cycle_s: 0.02,
@@ -321,6 +341,7 @@ impl PlantConfig {
             gain: [0.96, 0.93, 0.98],
             dl0_mm: [0.05, -0.08, 0.03],
             phi_sat_deg: [260.0, 240.0, 280.0],
+            cross_coupling: 0.0,
         };
         c.stepper = Stepper {
             rate_limit: true,
@@ -353,6 +374,9 @@ impl PlantConfig {
             frame_dx_mm: 12.5,
             frame_dy_mm: -7.3,
             frame_dphi_deg: 1.7,
+            registration_error_dx_mm: 0.0,
+            registration_error_dy_mm: 0.0,
+            registration_error_dphi_deg: 0.0,
         };
         c
     }
@@ -423,6 +447,33 @@ impl PlantConfig {
             }
             Ok(())
         };
+        check(
+            "tendon_map.cross_coupling",
+            self.tendon_map.cross_coupling,
+            self.tendon_map.cross_coupling.abs() < 0.5,
+            "must be within (-0.5, 0.5)",
+        )?;
+        for (k, v) in [
+            (
+                "capture.registration_error_dx_mm",
+                self.capture.registration_error_dx_mm,
+            ),
+            (
+                "capture.registration_error_dy_mm",
+                self.capture.registration_error_dy_mm,
+            ),
+            (
+                "capture.registration_error_dphi_deg",
+                self.capture.registration_error_dphi_deg,
+            ),
+        ] {
+            check(
+                k,
+                v,
+                v.abs() <= 1000.0,
+                "must be a finite number within +-1000",
+            )?;
+        }
         let m = &self.mechanics;
         check(
             "mechanics.ei_n_mm2",

@@ -92,6 +92,8 @@ pub struct TrueRobot {
     pub tendon_offset: [f64; 3],
     /// Home motor positions, steps.
     pub home_steps: [i32; 3],
+    /// Tendon cross-coupling: leg i is also pulled by this share of leg i-1's displacement.
+    pub cross_coupling: f64,
     /// Joint range, rad.
     pub joint_range: (f64, f64),
     /// Largest |bending|, rad.
@@ -130,6 +132,7 @@ impl TrueRobot {
             mm_per_step: std::array::from_fn(|i| robot.legs[i].actuation.mm_per_step()),
             tendon_offset: std::array::from_fn(|i| robot.legs[i].actuation.tendon_offset_mm),
             home_steps: home_steps(robot),
+            cross_coupling: t.cross_coupling,
             joint_range: (
                 robot.limits.joint_min_deg.to_radians(),
                 robot.limits.joint_max_deg.to_radians(),

@@ -78,6 +78,10 @@ impl TrueRobot {
     /// True bending of each segment for motor output positions `q` (steps) and tendon creep
     /// elongations `creep_mm` (mm), rad.
     pub fn bending_of_steps(&self, q: &[f64; 3], creep_mm: &[f64; 3]) -> [f64; 3] {
-        std::array::from_fn(|i| self.maps[i].bending(q[i] * self.mm_per_step[i] - creep_mm[i]))
+        std::array::from_fn(|i| {
+            let j = (i + 2) % 3;
+            let coupled = self.cross_coupling * q[j] * self.mm_per_step[j];
+            self.maps[i].bending(q[i] * self.mm_per_step[i] - creep_mm[i] + coupled)
+        })
     }
 }

@@ -255,6 +255,61 @@ fn accept<'a>(
     Some((cfg, nctx))
 }
 
+/// An effect's parameters as the configuration holds them now, with the uncertainties of the
+/// fit that found it (matched by name).
+fn current_params(c: &RobotConfig, name: &str, fitted: &[Estimate]) -> Vec<Estimate> {
+    let e = &c.effects;
+    let std = |n: &str| fitted.iter().find(|p| p.name == n).and_then(|p| p.std);
+    let p = |n: &str, v: f64, unit: &str| Estimate {
+        name: n.into(),
+        value: v,
+        std: std(n),
+        unit: unit.into(),
+    };
+    match name {
+        "latency" => e
+            .latency
+            .as_ref()
+            .map(|l| vec![p("latency", l.latency_s, "s")]),
+        "backlash" => e.backlash.as_ref().map(|b| {
+            (0..3)
+                .map(|i| p(&format!("play motor {}", i + 1), b.steps[i], "steps"))
+                .collect()
+        }),
+        "creep" => e.creep.as_ref().map(|cr| {
+            let mut v: Vec<Estimate> = (0..3)
+                .map(|i| p(&format!("gain leg {}", i + 1), cr.gain[i], "mm/mm"))
+                .collect();
+            v.push(p("time constant", cr.time_constant_s, "s"));
+            v
+        }),
+        "joint_springs" => e.compliance.as_ref().map(|k| {
+            vec![
+                p("k_M", k.k_m_n_mm_per_rad, "N mm/rad"),
+                p("k_P", k.k_p_n_mm_per_rad, "N mm/rad"),
+                p("EI (assumed)", k.ei_n_mm2, "N mm^2"),
+            ]
+        }),
+        "external_load" => e.compliance.as_ref().map(|k| {
+            vec![
+                p("force x", k.force_n[0], "N"),
+                p("force y", k.force_n[1], "N"),
+                p("couple", k.couple_n_mm, "N mm"),
+                p("EI (assumed)", k.ei_n_mm2, "N mm^2"),
+            ]
+        }),
+        "frame" => e.frame.as_ref().map(|f| {
+            vec![
+                p("dx", f.dx_mm, "mm"),
+                p("dy", f.dy_mm, "mm"),
+                p("dphi", f.dphi_deg, "deg"),
+            ]
+        }),
+        _ => None,
+    }
+    .unwrap_or_else(|| fitted.to_vec())
+}
+
 fn rms(sse: f64, n: usize) -> f64 {
     (sse / n.max(1) as f64).sqrt()
 }
@@ -469,6 +524,10 @@ pub fn attribute(
     }
     let (train, test) = (ctx.train(), ctx.test());
     let after = Errors::of(&ctx, &test);
+    // The values the final model holds (joint refinements move earlier effects too).
+    for a in &mut added {
+        a.params = current_params(&config, &a.name, &a.params);
+    }
     // What remains: against the noise, and the features it follows.
     let noise = series.iter().find_map(|s| s.row_noise);
     let remaining_ms = ctx.sse(&test, None) / test.len().max(1) as f64;
@@ -482,10 +541,15 @@ pub fn attribute(
         .take(6)
         .collect();
     let remains = excess > opts.min_effect_mm.max(0.25 * noise_ms.sqrt()) && !structured.is_empty();
-    let verdict = match (added.is_empty(), remains) {
+    // A refit of the calibration parameters (geometry, tendon map) absorbs, it does not
+    // explain: the verdict counts physical effects.
+    let physical = added
+        .iter()
+        .any(|a| !matches!(a.name.as_str(), "geometry" | "tendon_map"));
+    let verdict = match (physical, remains) {
         (_, false) => Verdict::Explained,
-        (false, true) => Verdict::PartlyExplained,
-        (true, true) => Verdict::Unexplained,
+        (true, true) => Verdict::PartlyExplained,
+        (false, true) => Verdict::Unexplained,
     };
     Ok(Attribution {
         before,

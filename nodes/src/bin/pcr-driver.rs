@@ -114,7 +114,7 @@ fn run(a: Args) -> Result<()> {
             let drawing = plant_cfg.drawing().map_err(|e| anyhow!("plant: {e}"))?;
             let fil = FirmwareInTheLoop::start(&drawing, &plant_cfg, FilOptions::default())
                 .map_err(|e| anyhow!("firmware in the loop: {e}"))?;
-            let frame = fil.plant().capture_model().frame;
+            let frame = fil.plant().capture_model().registered;
             let last = std::rc::Rc::new(std::cell::Cell::new(None));
             let drv = safety_stack(
                 FilDrive {
