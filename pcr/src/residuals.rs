@@ -197,5 +197,20 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             .with_context(|| format!("cannot write {}", j.display()))?;
         println!("json: {}", j.display());
     }
+    if let Some(dir) = &a.report {
+        let inputs = a
+            .data
+            .iter()
+            .map(|p| format!("`{}`", p.display()))
+            .chain(
+                a.holdout
+                    .iter()
+                    .map(|p| format!("`{}` (holdout)", p.display())),
+            )
+            .collect::<Vec<_>>()
+            .join(", ");
+        let p = pcr_residuals::report::write_report(dir, &res, &inputs)?;
+        println!("report: {}", p.display());
+    }
     Ok(())
 }

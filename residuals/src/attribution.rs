@@ -127,6 +127,17 @@ pub struct Attribution {
     /// The extended robot configuration.
     #[serde(skip)]
     pub robot: RobotConfig,
+    /// Plot data: per added effect, (change its linearised model predicts, residual along that
+    /// change) on held-out rows, mm.
+    #[serde(skip)]
+    pub effect_points: Vec<(String, Vec<(f64, f64)>)>,
+    /// Plot data: held-out rows' time (s, from the start of their recording) and position
+    /// residual before and after, mm.
+    #[serde(skip)]
+    pub residual_time: Vec<(f64, f64, f64)>,
+    /// Plot data: the strongest features of the remainder, (feature value, residual component).
+    #[serde(skip)]
+    pub feature_points: Vec<(String, String, Vec<(f64, f64)>)>,
 }
 
 /// Why the attribution failed.
@@ -310,6 +321,22 @@ fn current_params(c: &RobotConfig, name: &str, fitted: &[Estimate]) -> Vec<Estim
     .unwrap_or_else(|| fitted.to_vec())
 }
 
+/// (predicted change, residual along it) on held-out rows, at most 3000 points.
+fn effect_points(ctx: &Context, delta: &[[f64; 3]], test: &[usize]) -> Vec<(f64, f64)> {
+    let step = test.len().div_ceil(3000).max(1);
+    test.iter()
+        .step_by(step)
+        .filter_map(|&i| {
+            let d = delta[i];
+            let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            (n > 1e-9).then(|| {
+                let r = ctx.rows[i].r;
+                (n, (r[0] * d[0] + r[1] * d[1] + r[2] * d[2]) / n)
+            })
+        })
+        .collect()
+}
+
 fn rms(sse: f64, n: usize) -> f64 {
     (sse / n.max(1) as f64).sqrt()
 }
@@ -413,6 +440,8 @@ pub fn attribute(
     let mut scores = Vec::new();
     let mut added: Vec<Added> = Vec::new();
     let mut used: Vec<String> = Vec::new();
+    let mut effect_plots: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
+    let first_residuals: Vec<f64> = ctx.rows.iter().map(|r| r.r[0].hypot(r.r[1])).collect();
     for round in 1..=opts.max_rounds {
         let (train, test) = (ctx.train(), ctx.test());
         let names: Vec<&String> = opts
@@ -480,6 +509,7 @@ pub fn attribute(
         let mut accepted = false;
         for (f, s) in fits.into_iter().filter(|(_, s)| s.significant) {
             let name = f.name;
+            let points = effect_points(&ctx, &f.delta, &test);
             let Some((next, nctx)) = accept(&config, &ctx, f, series, blocks, w_phi) else {
                 mark(
                     &mut scores,
@@ -506,6 +536,7 @@ pub fn attribute(
                 continue;
             }
             used.push(name.to_string());
+            effect_plots.push((name.to_string(), points));
             added.push(Added {
                 name: name.to_string(),
                 description: candidates::describe(name).to_string(),
@@ -541,6 +572,37 @@ pub fn attribute(
         .take(6)
         .collect();
     let remains = excess > opts.min_effect_mm.max(0.25 * noise_ms.sqrt()) && !structured.is_empty();
+    let step = test.len().div_ceil(4000).max(1);
+    let residual_time: Vec<(f64, f64, f64)> = test
+        .iter()
+        .step_by(step)
+        .map(|&i| {
+            let row = &ctx.rows[i];
+            let s = &ctx.series[row.s];
+            let t0 = s.samples.first().map_or(0.0, |x| x.t_s);
+            (
+                s.samples[row.k].t_s - t0,
+                first_residuals.get(i).copied().unwrap_or(0.0),
+                row.r[0].hypot(row.r[1]),
+            )
+        })
+        .collect();
+    let feature_points: Vec<(String, String, Vec<(f64, f64)>)> = structured
+        .iter()
+        .take(if remains { 3 } else { 0 })
+        .filter_map(|l| {
+            let j = feats.names.iter().position(|n| *n == l.feature)?;
+            let c = ["x", "y", "phi"].iter().position(|n| *n == l.component)?;
+            Some((
+                l.feature.clone(),
+                l.component.clone(),
+                test.iter()
+                    .step_by(step)
+                    .map(|&i| (feats.values[i][j], ctx.rows[i].r[c]))
+                    .collect(),
+            ))
+        })
+        .collect();
     // A refit of the calibration parameters (geometry, tendon map) absorbs, it does not
     // explain: the verdict counts physical effects.
     let physical = added
@@ -568,5 +630,8 @@ pub fn attribute(
         ],
         options: opts.clone(),
         robot: config,
+        effect_points: effect_plots,
+        residual_time,
+        feature_points,
     })
 }

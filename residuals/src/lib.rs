@@ -13,6 +13,7 @@ pub mod features;
 pub mod linear;
 pub mod model;
 pub mod refine;
+pub mod report;
 pub mod series;
 
 pub use attribution::{attribute, Attribution, Options, Verdict};
