@@ -40,6 +40,9 @@ impl Default for Options {
     }
 }
 
+/// Plot data of one feature: its name, the residual component, (feature value, residual).
+pub type FeaturePoints = (String, String, Vec<(f64, f64)>);
+
 /// How one candidate scored in one round.
 #[derive(Debug, Clone, Serialize)]
 pub struct Score {
@@ -137,7 +140,7 @@ pub struct Attribution {
     pub residual_time: Vec<(f64, f64, f64)>,
     /// Plot data: the strongest features of the remainder, (feature value, residual component).
     #[serde(skip)]
-    pub feature_points: Vec<(String, String, Vec<(f64, f64)>)>,
+    pub feature_points: Vec<FeaturePoints>,
 }
 
 /// Why the attribution failed.
@@ -587,7 +590,7 @@ pub fn attribute(
             )
         })
         .collect();
-    let feature_points: Vec<(String, String, Vec<(f64, f64)>)> = structured
+    let feature_points: Vec<FeaturePoints> = structured
         .iter()
         .take(if remains { 3 } else { 0 })
         .filter_map(|l| {
