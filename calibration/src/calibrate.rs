@@ -122,6 +122,8 @@ pub struct TableRow {
     pub test_rms_mm: Option<f64>,
     /// Whether all three fits converged.
     pub converged: bool,
+    /// Whether all three maps are monotonic over the data's range (else not selectable).
+    pub monotonic: bool,
     /// Why a fit failed.
     pub error: Option<String>,
 }
@@ -349,6 +351,7 @@ pub fn calibrate_data(
             train_rms_mm: complete.then(|| pooled(&legs, false)).flatten(),
             test_rms_mm: complete.then(|| pooled(&legs, true)).flatten(),
             converged: complete && legs.iter().all(|f| f.converged),
+            monotonic: complete && legs.iter().all(|f| f.monotonic),
             legs,
             error,
         });
@@ -380,7 +383,9 @@ pub fn calibrate_data(
             (k.table_index(), "forced by the user".to_string())
         }
         None => {
-            let usable = table1.iter().filter(|r| r.error.is_none() && r.converged);
+            let usable = table1
+                .iter()
+                .filter(|r| r.error.is_none() && r.converged && r.monotonic);
             let best = if has_test {
                 usable
                     .filter_map(|r| Some((r.index, r.test_rms_mm?)))
@@ -410,8 +415,12 @@ pub fn calibrate_data(
                         .iter()
                         .map(|r| match &r.error {
                             Some(e) => format!("  {e}"),
-                            None => format!(
+                            None if !r.converged => format!(
                                 "  function {} ({}): the fit did not converge",
+                                r.index, r.name
+                            ),
+                            None => format!(
+                                "  function {} ({}): the fitted map turns back inside the data's range",
                                 r.index, r.name
                             ),
                         })

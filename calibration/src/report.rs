@@ -143,6 +143,11 @@ pub fn write_report(
         );
         if let Some(e) = &r.error {
             let _ = writeln!(md, "| | failed: {e} | | | | | | | |");
+        } else if !r.monotonic {
+            let _ = writeln!(
+                md,
+                "| | the fitted map turns back inside the data's range: not selectable | | | | | | | |"
+            );
         }
     }
     let _ = writeln!(

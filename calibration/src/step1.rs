@@ -191,6 +191,9 @@ pub struct LegFit {
     pub evaluations: usize,
     /// Strongly correlated parameter pairs.
     pub correlated: Vec<Correlated>,
+    /// Whether the fitted map is strictly monotonic over the data's displacement range (10 %
+    /// margin each side): a map that turns back cannot be inverted by the IK.
+    pub monotonic: bool,
 }
 
 /// Why a leg could not be fitted.
@@ -400,7 +403,15 @@ pub fn fit_leg(
         let (r, m) = m_errors(&config, test);
         (Some(r), Some(m))
     };
+    let (lo, hi) = train
+        .iter()
+        .chain(test)
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |a, o| {
+            (a.0.min(o.dl_mm), a.1.max(o.dl_mm))
+        });
+    let monotonic = is_monotonic(&TendonMap::from_spec(&config.tendon_map), lo, hi);
     Ok(LegFit {
+        monotonic,
         leg: leg_index,
         kind,
         config,
@@ -415,6 +426,32 @@ pub fn fit_leg(
         evaluations: fit.evaluations,
         correlated,
     })
+}
+
+/// Whether a map is strictly monotonic on [lo, hi] widened by 10 % of the span each side.
+pub fn is_monotonic(map: &TendonMap, lo: f64, hi: f64) -> bool {
+    if !(lo.is_finite() && hi.is_finite()) {
+        return false;
+    }
+    let m = 0.1 * (hi - lo).max(1e-3);
+    let (a, b) = (lo - m, hi + m);
+    let n = 800;
+    let mut prev = map.kappa(a);
+    let mut sign = 0.0;
+    for k in 1..=n {
+        let v = map.kappa(a + (b - a) * k as f64 / n as f64);
+        let d = v - prev;
+        if d == 0.0 || !d.is_finite() {
+            return false;
+        }
+        if sign == 0.0 {
+            sign = d.signum();
+        } else if d.signum() != sign {
+            return false;
+        }
+        prev = v;
+    }
+    true
 }
 
 /// The unit of coefficient `j` of a family (kappa in 1/mm, dl in mm).

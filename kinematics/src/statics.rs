@@ -99,44 +99,42 @@ impl Robot {
         let n = QUAD;
         let h = leg.l_c / n as f64;
         // Local frame: start tangent +y, alpha(s) = pi/2 - kappa s.
-        let pts: Vec<(Vec2, f64)> = (0..=n)
-            .map(|k| {
-                let s = k as f64 * h;
-                let x = kappa * s;
-                let r = if x.abs() < 1e-9 {
-                    [0.5 * kappa * s * s, s]
-                } else {
-                    [(1.0 - x.cos()) / kappa, x.sin() / kappa]
-                };
-                (r, std::f64::consts::FRAC_PI_2 - x)
-            })
-            .collect();
-        let rl = pts[n].0;
+        // Local frame: start tangent +y, tangent angle pi/2 - kappa s: position r(s) and normal
+        // n(s) = (-cos(kappa s), sin(kappa s)), by rotation recurrence (two trig calls).
+        let (sd, cd) = (kappa * h).sin_cos();
+        let (mut sk, mut ck) = (0.0f64, 1.0f64);
+        let mut r = Vec::with_capacity(n + 1);
+        let mut nrm = Vec::with_capacity(n + 1);
+        for k in 0..=n {
+            let s = k as f64 * h;
+            let x = kappa * s;
+            r.push(if x.abs() < 1e-9 {
+                [0.5 * kappa * s * s, s]
+            } else {
+                [(1.0 - ck) / kappa, sk / kappa]
+            });
+            nrm.push([-ck, sk]);
+            let (s2, c2) = (sk * cd + ck * sd, ck * cd - sk * sd);
+            sk = s2;
+            ck = c2;
+        }
+        let rl = r[n];
         let mut cols = [[0.0; 2]; 2];
         for (c, f) in [[1.0, 0.0], [0.0, 1.0]].iter().enumerate() {
             // Force given in the base frame: rotate into the local frame.
             let fl = leg.to_local(*f);
-            let gs: Vec<f64> = pts
-                .iter()
-                .map(|(r, _)| g::cross(g::sub(rl, *r), fl))
-                .collect();
+            let gs: Vec<f64> = r.iter().map(|p| g::cross(g::sub(rl, *p), fl)).collect();
             let mean = (0..n).map(|k| 0.5 * (gs[k] + gs[k + 1])).sum::<f64>() / n as f64;
             // d alpha(s) = integral of (g - mean)/EI; tip displacement = integral of d alpha n.
             let mut da = 0.0;
             let mut dr = [0.0, 0.0];
-            let mut prev = 0.0;
             for k in 0..n {
                 let da_next = da + h * 0.5 * ((gs[k] - mean) + (gs[k + 1] - mean)) / ei;
-                let (a0, a1) = (pts[k].1, pts[k + 1].1);
-                let n0 = [-a0.sin(), a0.cos()];
-                let n1 = [-a1.sin(), a1.cos()];
-                dr[0] += 0.5 * h * (prev * n0[0] + da_next * n1[0]);
-                dr[1] += 0.5 * h * (prev * n0[1] + da_next * n1[1]);
-                prev = da_next;
+                dr[0] += 0.5 * h * (da * nrm[k][0] + da_next * nrm[k + 1][0]);
+                dr[1] += 0.5 * h * (da * nrm[k][1] + da_next * nrm[k + 1][1]);
                 da = da_next;
             }
-            let db = leg.to_base(dr);
-            cols[c] = db;
+            cols[c] = leg.to_base(dr);
         }
         // cols[c] is the displacement for a unit force along base axis c.
         [[cols[0][0], cols[1][0]], [cols[0][1], cols[1][1]]]

@@ -183,9 +183,11 @@ fn print_summary(cal: &Calibration) {
             r.name,
             opt(r.train_rms_mm, 3),
             opt(r.test_rms_mm, 3),
-            r.error
-                .as_deref()
-                .map_or(String::new(), |e| format!("  failed: {e}"))
+            match (&r.error, r.monotonic) {
+                (Some(e), _) => format!("  failed: {e}"),
+                (None, false) => "  (the map turns back inside the data: not selectable)".into(),
+                _ => String::new(),
+            }
         );
     }
     println!("selected: function {} ({})", cal.selected, cal.selected_by);

@@ -114,9 +114,10 @@ fn fit_joint(
     offset: Option<&[[f64; 3]]>,
 ) -> Option<(linear::LinearFit, Vec<[f64; 3]>)> {
     let n = n_e + nui.n;
+    let table = ctx.nuisance();
     let cols = |i: usize, c: &mut Columns| {
         effect(i, c);
-        nui.columns(ctx, i, c, n_e);
+        c[n_e..n].copy_from_slice(&table.cols[i]);
     };
     // Residual with the offset taken out: solve on a shifted context copy of r.
     let fit = match offset {
@@ -149,7 +150,7 @@ fn nuisance_change(nui: Nuisance, x: Vec<f64>, n_e: usize) -> impl Fn(&mut Robot
 
 /// `geometry`: the calibration parameters refitted on every training row.
 pub fn geometry(ctx: &Context, train: &[usize]) -> Option<Fitted> {
-    let nui = Nuisance::of(ctx);
+    let nui = ctx.nuisance().nui.clone();
     let (fit, delta) = fit_joint(ctx, &nui, train, 0, &|_, _| {}, None)?;
     let params = nui
         .names()
@@ -173,7 +174,7 @@ pub fn geometry(ctx: &Context, train: &[usize]) -> Option<Fitted> {
 
 /// `frame`: measured = robot pose through a small rigid transform.
 pub fn frame(ctx: &Context, train: &[usize]) -> Option<Fitted> {
-    let nui = Nuisance::of(ctx);
+    let nui = ctx.nuisance().nui.clone();
     let effect = |i: usize, c: &mut Columns| {
         let row = &ctx.rows[i];
         let m = ctx.series[row.s].samples[row.k].pose.unwrap_or([0.0; 3]);
@@ -219,9 +220,25 @@ pub fn frame(ctx: &Context, train: &[usize]) -> Option<Fitted> {
     })
 }
 
-/// Effect-only SSE of a fixed residual change on the training rows.
-fn sse_of(ctx: &Context, train: &[usize], delta: &[[f64; 3]]) -> f64 {
-    ctx.sse(train, Some(delta))
+/// Rows the 1-D profile searches and scans run on: the training rows, thinned evenly to at most
+/// [`SEARCH_ROWS`] (the final fit uses every training row).
+fn search_rows(train: &[usize]) -> Vec<usize> {
+    let step = train.len().div_ceil(SEARCH_ROWS).max(1);
+    train.iter().step_by(step).copied().collect()
+}
+
+/// At most this many rows in a profile search or scan.
+pub const SEARCH_ROWS: usize = 8000;
+
+/// SSE of the rows `rows` after subtracting changes given for those rows (aligned).
+fn sse_at(ctx: &Context, rows: &[usize], delta: &[[f64; 3]]) -> f64 {
+    rows.iter()
+        .zip(delta)
+        .map(|(&i, d)| {
+            let r = ctx.rows[i].r;
+            (r[0] - d[0]).powi(2) + (r[1] - d[1]).powi(2) + (r[2] - d[2]).powi(2)
+        })
+        .sum()
 }
 
 /// A 1-D minimisation of `f` on a grid, refined by golden section around the best point;
@@ -270,9 +287,28 @@ fn profile_std(sse: f64, n: usize, curv: Option<f64>) -> Option<f64> {
     curv.map(|c| (2.0 * s2 / c).sqrt())
 }
 
+/// The change of the predicted pose of the rows `rows` (every measured row when `None`) when
+/// their motors' outputs become `q_new` (per series and row).
+fn motor_change(ctx: &Context, q_new: &[Vec<[f64; 3]>], rows: Option<&[usize]>) -> Vec<[f64; 3]> {
+    let one = |i: usize| {
+        let row = &ctx.rows[i];
+        let q = ctx.pred(row).q_eff;
+        let o = q_new[row.s][row.k];
+        motor_delta(ctx, i, [o[0] - q[0], o[1] - q[1], o[2] - q[2]])
+    };
+    match rows {
+        Some(r) => r.iter().map(|&i| one(i)).collect(),
+        None => (0..ctx.rows.len()).map(one).collect(),
+    }
+}
+
 /// The change of every measured row's predicted pose when the motor-side effects of the model
 /// are replaced by `effects` (latency, periodic errors, backlash, in the model's chain order).
-fn motor_side_delta(ctx: &Context, effects: &pcr_robot::effects::Effects) -> Vec<[f64; 3]> {
+fn motor_side_delta(
+    ctx: &Context,
+    effects: &pcr_robot::effects::Effects,
+    rows: Option<&[usize]>,
+) -> Vec<[f64; 3]> {
     let q_new: Vec<Vec<[f64; 3]>> = ctx
         .series
         .iter()
@@ -285,29 +321,22 @@ fn motor_side_delta(ctx: &Context, effects: &pcr_robot::effects::Effects) -> Vec
             )
         })
         .collect();
-    ctx.rows
-        .iter()
-        .enumerate()
-        .map(|(i, row)| {
-            let q = ctx.pred(row).q_eff;
-            let o = q_new[row.s][row.k];
-            motor_delta(ctx, i, [o[0] - q[0], o[1] - q[1], o[2] - q[2]])
-        })
-        .collect()
+    motor_change(ctx, &q_new, rows)
 }
 
 /// `latency`: the motion lags the command by tau.
 pub fn latency(ctx: &Context, train: &[usize]) -> Option<Fitted> {
-    let shift = |tau: f64| -> Vec<[f64; 3]> {
+    let rows = search_rows(train);
+    let shift = |tau: f64, rows: Option<&[usize]>| -> Vec<[f64; 3]> {
         let mut e = ctx.model.config.effects.clone();
         e.latency = Some(Latency { latency_s: tau });
-        motor_side_delta(ctx, &e)
+        motor_side_delta(ctx, &e, rows)
     };
     let grid: Vec<f64> = (0..=60).map(|k| -0.1 + 0.01 * k as f64).collect();
-    let (tau, sse, curv) = minimise_1d(&mut |t| sse_of(ctx, train, &shift(t)), &grid);
-    let std = profile_std(sse, 3 * train.len(), curv);
-    let nui = Nuisance::of(ctx);
-    let off = shift(tau);
+    let (tau, sse, curv) = minimise_1d(&mut |t| sse_at(ctx, &rows, &shift(t, Some(&rows))), &grid);
+    let std = profile_std(sse, 3 * rows.len(), curv);
+    let nui = ctx.nuisance().nui.clone();
+    let off = shift(tau, None);
     let (fit, delta) = fit_joint(ctx, &nui, train, 0, &|_, _| {}, Some(&off))?;
     let nuis = nuisance_change(nui, fit.x.clone(), 0);
     Some(Fitted {
@@ -325,33 +354,43 @@ pub fn latency(ctx: &Context, train: &[usize]) -> Option<Fitted> {
 
 /// `backlash`: play of b_i steps on each motor.
 pub fn backlash(ctx: &Context, train: &[usize]) -> Option<Fitted> {
-    let delta_of = |b: [f64; 3]| -> Vec<[f64; 3]> {
-        let mut e = ctx.model.config.effects.clone();
-        e.backlash = Some(Backlash { steps: b });
-        motor_side_delta(ctx, &e)
+    let e = &ctx.model.config.effects;
+    let pre: Vec<Vec<[f64; 3]>> = ctx
+        .series
+        .iter()
+        .map(|s| crate::model::steps_before_backlash(s, e.latency.as_ref(), &e.periodic))
+        .collect();
+    let rows = search_rows(train);
+    let delta_of = |b: [f64; 3], rows: Option<&[usize]>| -> Vec<[f64; 3]> {
+        let q_new: Vec<Vec<[f64; 3]>> = pre
+            .iter()
+            .map(|q| {
+                let mut q = q.clone();
+                crate::model::apply_backlash(&mut q, &Backlash { steps: b });
+                q
+            })
+            .collect();
+        motor_change(ctx, &q_new, rows)
     };
     let grid: Vec<f64> = (0..=40).map(|k| 0.5 * k as f64).collect();
     let mut b = [0.0; 3];
     let mut stds = [None; 3];
-    let mut sse = 0.0;
     for _sweep in 0..2 {
         for m in 0..3 {
             let (x, s, curv) = minimise_1d(
                 &mut |v| {
                     let mut bb = b;
                     bb[m] = v.max(0.0);
-                    sse_of(ctx, train, &delta_of(bb))
+                    sse_at(ctx, &rows, &delta_of(bb, Some(&rows)))
                 },
                 &grid,
             );
             b[m] = x.max(0.0);
-            sse = s;
-            stds[m] = profile_std(s, 3 * train.len(), curv);
+            stds[m] = profile_std(s, 3 * rows.len(), curv);
         }
     }
-    let _ = sse;
-    let nui = Nuisance::of(ctx);
-    let off = delta_of(b);
+    let nui = ctx.nuisance().nui.clone();
+    let off = delta_of(b, None);
     let (fit, delta) = fit_joint(ctx, &nui, train, 0, &|_, _| {}, Some(&off))?;
     let nuis = nuisance_change(nui, fit.x.clone(), 0);
     Some(Fitted {
@@ -395,7 +434,7 @@ pub fn creep(ctx: &Context, train: &[usize]) -> Option<Fitted> {
             })
             .collect()
     };
-    let nui = Nuisance::of(ctx);
+    let nui = ctx.nuisance().nui.clone();
     let effect_for = |l: &Vec<Vec<[f64; 3]>>, i: usize, c: &mut Columns| {
         let row = &ctx.rows[i];
         let e = l[row.s][row.k];
@@ -405,9 +444,10 @@ pub fn creep(ctx: &Context, train: &[usize]) -> Option<Fitted> {
             c[m] = motor_delta(ctx, i, dq);
         }
     };
+    let rows = search_rows(train);
     let sse_for = |t_c: f64| -> f64 {
         let l = lag(t_c);
-        linear::solve(ctx, train, 3, &|i, c| effect_for(&l, i, c)).map_or(f64::INFINITY, |f| f.sse)
+        linear::solve(ctx, &rows, 3, &|i, c| effect_for(&l, i, c)).map_or(f64::INFINITY, |f| f.sse)
     };
     let grid: Vec<f64> = [2.0f64, 5.0, 10.0, 20.0, 40.0, 80.0, 160.0, 320.0, 640.0]
         .iter()
@@ -415,7 +455,7 @@ pub fn creep(ctx: &Context, train: &[usize]) -> Option<Fitted> {
         .collect();
     let (lt, sse, curv) = minimise_1d(&mut |x| sse_for(x.exp()), &grid);
     let t_c = lt.exp();
-    let std_t = profile_std(sse, 3 * train.len(), curv).map(|s| s * t_c);
+    let std_t = profile_std(sse, 3 * rows.len(), curv).map(|s| s * t_c);
     let l = lag(t_c);
     let (fit, delta) = fit_joint(ctx, &nui, train, 3, &|i, c| effect_for(&l, i, c), None)?;
     let gain = [fit.x[0], fit.x[1], fit.x[2]];
@@ -467,21 +507,7 @@ fn loaded(ctx: &Context, train: &[usize], name: &'static str, which: &[usize]) -
     let loads = Loads::from_compliance(&base);
     // Per-row responses (per N, per 100 N mm, per 100 N mm/rad for conditioning).
     let scale = [1.0, 1.0, 100.0, 100.0, 100.0];
-    let resp: Vec<[[f64; 3]; 5]> = ctx
-        .rows
-        .iter()
-        .map(|row| {
-            let p = ctx.pred(row);
-            let Some(pose) = p.pose else {
-                return [[0.0; 3]; 5];
-            };
-            let guess = pcr_kinematics::Pose::new(pose[0], pose[1], pose[2]);
-            ctx.model
-                .robot
-                .load_response(&p.kappa, &loads, &guess)
-                .unwrap_or([[0.0; 3]; 5])
-        })
-        .collect();
+    let resp = ctx.load_responses(&loads);
     let n_e = which.len();
     let effect = |i: usize, c: &mut Columns| {
         for (a, &j) in which.iter().enumerate() {
@@ -493,7 +519,7 @@ fn loaded(ctx: &Context, train: &[usize], name: &'static str, which: &[usize]) -
             ];
         }
     };
-    let nui = Nuisance::of(ctx);
+    let nui = ctx.nuisance().nui.clone();
     let (fit, delta) = fit_joint(ctx, &nui, train, n_e, &effect, None)?;
     let mut v = [0.0; 5];
     let mut sd = [None; 5];
@@ -569,7 +595,7 @@ pub fn tendon_map(ctx: &Context, train: &[usize]) -> Option<Fitted> {
             }
         }
     };
-    let nui = Nuisance::of(ctx);
+    let nui = ctx.nuisance().nui.clone();
     let (fit, delta) = fit_joint(ctx, &nui, train, 3 * NB, &effect, None)?;
     // The displacement range of the data, per leg.
     let mut range = [[f64::INFINITY, f64::NEG_INFINITY]; 3];
@@ -691,7 +717,7 @@ pub fn periodic(ctx: &Context, train: &[usize]) -> Option<Fitted> {
     // with itself, then scan.
     let mut best: Option<(f64, usize, f64)> = None; // (sse reduction, motor, period)
     for m in 0..3 {
-        let rows: Vec<([f64; 3], [f64; 3], f64)> = train
+        let rows: Vec<([f64; 3], [f64; 3], f64)> = search_rows(train)
             .iter()
             .map(|&i| {
                 let mut dq = [0.0; 3];
@@ -737,7 +763,7 @@ pub fn periodic(ctx: &Context, train: &[usize]) -> Option<Fitted> {
         c[0] = col.map(|v| v * sn);
         c[1] = col.map(|v| v * cs);
     };
-    let nui = Nuisance::of(ctx);
+    let nui = ctx.nuisance().nui.clone();
     let (fit, delta) = fit_joint(ctx, &nui, train, 2, &effect, None)?;
     // Output = q - A sin(w q + phase): the residual change is -A(sin cos(ph) + cos sin(ph)).
     let (a_s, a_c) = (-fit.x[0], -fit.x[1]);

@@ -34,6 +34,19 @@ pub struct Context<'a> {
     pub w_phi: f64,
     /// Rows the model could not predict (FK failed).
     pub unpredicted: usize,
+    /// The calibration parameters' columns of every row, computed on first use.
+    nuisance: std::sync::OnceLock<std::sync::Arc<NuisanceTable>>,
+    /// The five load responses of every row, computed on first use.
+    loads: std::sync::OnceLock<std::sync::Arc<Vec<[[f64; 3]; 5]>>>,
+}
+
+/// The nuisance parameters and their columns for every row of a context.
+#[derive(Debug)]
+pub struct NuisanceTable {
+    /// The parameters.
+    pub nui: crate::linear::Nuisance,
+    /// Columns per row.
+    pub cols: Vec<crate::linear::Columns>,
 }
 
 impl<'a> Context<'a> {
@@ -68,7 +81,48 @@ impl<'a> Context<'a> {
             rows,
             w_phi,
             unpredicted,
+            nuisance: std::sync::OnceLock::new(),
+            loads: std::sync::OnceLock::new(),
         }
+    }
+
+    /// The nuisance columns of every row (computed once per context).
+    pub fn nuisance(&self) -> std::sync::Arc<NuisanceTable> {
+        self.nuisance
+            .get_or_init(|| {
+                let nui = crate::linear::Nuisance::of(self);
+                let cols = nui.table(self);
+                std::sync::Arc::new(NuisanceTable { nui, cols })
+            })
+            .clone()
+    }
+
+    /// The first-order responses of every row's pose to the five load parameters at `loads`
+    /// (computed once per context; the loads are those of the context's model).
+    pub fn load_responses(
+        &self,
+        loads: &pcr_kinematics::statics::Loads,
+    ) -> std::sync::Arc<Vec<[[f64; 3]; 5]>> {
+        self.loads
+            .get_or_init(|| {
+                std::sync::Arc::new(
+                    self.rows
+                        .iter()
+                        .map(|row| {
+                            let p = self.pred(row);
+                            let Some(pose) = p.pose else {
+                                return [[0.0; 3]; 5];
+                            };
+                            let guess = pcr_kinematics::Pose::new(pose[0], pose[1], pose[2]);
+                            self.model
+                                .robot
+                                .load_response(&p.kappa, loads, &guess)
+                                .unwrap_or([[0.0; 3]; 5])
+                        })
+                        .collect(),
+                )
+            })
+            .clone()
     }
 
     /// The prediction of a row.

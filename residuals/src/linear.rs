@@ -5,7 +5,7 @@
 use crate::context::Context;
 use nalgebra::{DMatrix, DVector};
 use pcr_kinematics::{Leg, TendonMap};
-use pcr_robot::geometry as g;
+use pcr_robot::{geometry as g, Vec2};
 
 /// Design columns of one row: `cols[j]` is d(predicted, weighted pose)/d(param j).
 pub type Columns = Vec<[f64; 3]>;
@@ -115,9 +115,11 @@ pub fn motor_delta(ctx: &Context, i: usize, dq: [f64; 3]) -> [f64; 3] {
 
 /// The calibration parameters (the paper's step-1 and step-2 sets) as nuisance columns:
 /// per leg psi (deg), l_C (mm), the map coefficients, r_p (mm), theta_p (deg).
+#[derive(Debug, Clone)]
 pub struct Nuisance {
-    legs: [Leg; 3],
     cfg: Vec<pcr_robot::LegConfig>,
+    /// Per leg: the leg as it is and perturbed in each geometric parameter, with P_i^E.
+    legs: Vec<[(Leg, Vec2); 1 + GEO.len()]>,
     n_map: [usize; 3],
     /// Number of columns.
     pub n: usize,
@@ -125,13 +127,30 @@ pub struct Nuisance {
 }
 
 const GEO: [&str; 4] = ["psi_deg", "l_c_mm", "r_p_mm", "theta_p_deg"];
+/// Finite-difference step of the geometric parameters (deg or mm).
+const GEO_STEP: f64 = 1e-4;
 
 impl Nuisance {
     /// The nuisance set of the context's model.
     pub fn of(ctx: &Context) -> Nuisance {
         let cfg = ctx.model.config.legs.clone();
-        let legs = std::array::from_fn(|i| Leg::from_config(&cfg[i]));
         let n_map: [usize; 3] = std::array::from_fn(|i| cfg[i].tendon_map.model.n_coeffs());
+        let legs = cfg
+            .iter()
+            .map(|c| {
+                std::array::from_fn(|k| {
+                    let mut p = c.clone();
+                    match k {
+                        1 => p.psi_deg += GEO_STEP,
+                        2 => p.l_c_mm += GEO_STEP,
+                        3 => p.r_p_mm += GEO_STEP,
+                        4 => p.theta_p_deg += GEO_STEP,
+                        _ => {}
+                    }
+                    (Leg::from_config(&p), p.platform_point())
+                })
+            })
+            .collect();
         let mut names = Vec::new();
         for i in 0..3 {
             for gname in GEO {
@@ -160,14 +179,14 @@ impl Nuisance {
         (0..i).map(|l| GEO.len() + self.n_map[l]).sum()
     }
 
-    /// The columns of row `i` (appended after `start` in `out`).
+    /// The columns of row `i` (written from `start` on in `out`).
     pub fn columns(&self, ctx: &Context, i: usize, out: &mut Columns, start: usize) {
+        for c in out.iter_mut().skip(start).take(self.n) {
+            *c = [0.0; 3];
+        }
         let row = &ctx.rows[i];
         let p = ctx.pred(row);
         let Some(pose) = p.pose else {
-            for c in out.iter_mut().skip(start).take(self.n) {
-                *c = [0.0; 3];
-            }
             return;
         };
         let x = pcr_kinematics::Pose::new(pose[0], pose[1], pose[2]);
@@ -179,24 +198,22 @@ impl Nuisance {
         for leg in 0..3 {
             let off = start + self.offset(leg);
             // dh_leg/d param by finite differences of the constraint alone.
-            let h0 = self.constraint(leg, &self.cfg[leg], &x, p.kappa[leg]);
-            for (gk, name) in GEO.iter().enumerate() {
-                let mut c = self.cfg[leg].clone();
-                let step = 1e-4;
-                match *name {
-                    "psi_deg" => c.psi_deg += step,
-                    "l_c_mm" => c.l_c_mm += step,
-                    "r_p_mm" => c.r_p_mm += step,
-                    _ => c.theta_p_deg += step,
-                }
-                // l_C changes the curvature's effect through theta = kappa l_C: keep kappa.
-                let dh = (self.constraint(leg, &c, &x, p.kappa[leg]) - h0) / step;
-                let col = [
+            let h = |k: usize| {
+                let (l, pe) = &self.legs[leg][k];
+                let m = l.joint_m(p.kappa[leg]);
+                let pe = g::rot(x.phi, *pe);
+                let d = g::sub(g::add([x.x, x.y], pe), m);
+                g::dot(d, d) - l.l_st * l.l_st
+            };
+            let h0 = h(0);
+            for gk in 0..GEO.len() {
+                // l_C changes the segment at a fixed curvature (theta = kappa l_C).
+                let dh = (h(gk + 1) - h0) / GEO_STEP;
+                out[off + gk] = [
                     -ainv[(0, leg)] * dh,
                     -ainv[(1, leg)] * dh,
                     -ainv[(2, leg)] * dh * ctx.w_phi,
                 ];
-                out[off + gk] = col;
             }
             // Map coefficients: d pose / d kappa_leg * basis_j(dl).
             let kind = self.cfg[leg].tendon_map.model;
@@ -213,22 +230,15 @@ impl Nuisance {
         }
     }
 
-    fn constraint(
-        &self,
-        leg: usize,
-        c: &pcr_robot::LegConfig,
-        x: &pcr_kinematics::Pose,
-        kappa: f64,
-    ) -> f64 {
-        let l = if std::ptr::eq(c, &self.cfg[leg]) {
-            self.legs[leg].clone()
-        } else {
-            Leg::from_config(c)
-        };
-        let m = l.joint_m(kappa);
-        let pe = g::rot(x.phi, c.platform_point());
-        let d = g::sub(g::add([x.x, x.y], pe), m);
-        g::dot(d, d) - c.l_st_mm * c.l_st_mm
+    /// The columns of every row of a context, computed once.
+    pub fn table(&self, ctx: &Context) -> Vec<Columns> {
+        (0..ctx.rows.len())
+            .map(|i| {
+                let mut c = vec![[0.0; 3]; self.n];
+                self.columns(ctx, i, &mut c, 0);
+                c
+            })
+            .collect()
     }
 
     /// Applies parameter changes `dx` (in column order) to a robot configuration's legs.

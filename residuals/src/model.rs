@@ -164,50 +164,41 @@ impl ExtendedModel {
     }
 }
 
-/// The commanded motor positions of a series interpolated at time `t`.
-pub fn steps_at(s: &Series, t: f64) -> [f64; 3] {
+/// The commanded motor positions of every row shifted back by `delay` (interpolated; one pass).
+pub fn delayed_steps(s: &Series, delay: f64) -> Vec<[f64; 3]> {
     let x = &s.samples;
-    if x.is_empty() {
-        return [0.0; 3];
+    let mut out = Vec::with_capacity(x.len());
+    let mut j = 0usize;
+    for r in x {
+        let t = r.t_s - delay;
+        while j + 1 < x.len() && x[j + 1].t_s <= t {
+            j += 1;
+        }
+        while j > 0 && x[j].t_s > t {
+            j -= 1;
+        }
+        let q = if t <= x[0].t_s {
+            x[0].q
+        } else if j + 1 >= x.len() {
+            x[x.len() - 1].q
+        } else {
+            let (a, b) = (&x[j], &x[j + 1]);
+            let f = (t - a.t_s) / (b.t_s - a.t_s);
+            std::array::from_fn(|i| a.q[i] + f * (b.q[i] - a.q[i]))
+        };
+        out.push(q);
     }
-    if t <= x[0].t_s {
-        return x[0].q;
-    }
-    let k = x.partition_point(|r| r.t_s <= t);
-    if k >= x.len() {
-        return x[x.len() - 1].q;
-    }
-    let (a, b) = (&x[k - 1], &x[k]);
-    let f = (t - a.t_s) / (b.t_s - a.t_s);
-    std::array::from_fn(|i| a.q[i] + f * (b.q[i] - a.q[i]))
+    out
 }
 
-/// The play operator: the output follows `input` through a dead band of `width`.
-pub fn play(input: &[f64], width: f64, start: f64) -> Vec<f64> {
-    let h = 0.5 * width.max(0.0);
-    let mut out = start;
-    input
-        .iter()
-        .map(|&x| {
-            out = out.clamp(x - h, x + h);
-            out
-        })
-        .collect()
-}
-
-/// Motor outputs after latency, periodic transmission errors and backlash.
-pub fn effective_steps(
+/// Motor outputs after latency and periodic transmission errors (before backlash).
+pub fn steps_before_backlash(
     s: &Series,
     latency: Option<&Latency>,
     periodic: &[Periodic],
-    backlash: Option<&Backlash>,
 ) -> Vec<[f64; 3]> {
     let mut q: Vec<[f64; 3]> = match latency {
-        Some(l) => s
-            .samples
-            .iter()
-            .map(|x| steps_at(s, x.t_s - l.latency_s))
-            .collect(),
+        Some(l) => delayed_steps(s, l.latency_s),
         None => s.samples.iter().map(|x| x.q).collect(),
     };
     for p in periodic {
@@ -217,14 +208,34 @@ pub fn effective_steps(
             v[i] -= p.amplitude_steps * (std::f64::consts::TAU * v[i] / p.period_steps + ph).sin();
         }
     }
-    if let Some(b) = backlash {
-        for i in 0..3 {
-            let col: Vec<f64> = q.iter().map(|v| v[i]).collect();
-            let start = col.first().copied().unwrap_or(0.0);
-            for (v, o) in q.iter_mut().zip(play(&col, b.steps[i], start)) {
-                v[i] = o;
-            }
+    q
+}
+
+/// Backlash on motor outputs, in place.
+pub fn apply_backlash(q: &mut [[f64; 3]], b: &Backlash) {
+    for i in 0..3 {
+        if b.steps[i] == 0.0 {
+            continue;
         }
+        let h = 0.5 * b.steps[i];
+        let mut out = q.first().map_or(0.0, |v| v[i]);
+        for v in q.iter_mut() {
+            out = out.clamp(v[i] - h, v[i] + h);
+            v[i] = out;
+        }
+    }
+}
+
+/// Motor outputs after latency, periodic transmission errors and backlash.
+pub fn effective_steps(
+    s: &Series,
+    latency: Option<&Latency>,
+    periodic: &[Periodic],
+    backlash: Option<&Backlash>,
+) -> Vec<[f64; 3]> {
+    let mut q = steps_before_backlash(s, latency, periodic);
+    if let Some(b) = backlash {
+        apply_backlash(&mut q, b);
     }
     q
 }
@@ -331,8 +342,38 @@ mod tests {
     use super::*;
 
     #[test]
-    fn play_has_a_dead_band() {
-        let out = play(&[0.0, 1.0, 3.0, 2.0, 1.0, 0.0, 3.0], 2.0, 0.0);
+    fn backlash_is_a_dead_band() {
+        let mut q: Vec<[f64; 3]> = [0.0, 1.0, 3.0, 2.0, 1.0, 0.0, 3.0]
+            .iter()
+            .map(|v| [*v, *v, 0.0])
+            .collect();
+        apply_backlash(
+            &mut q,
+            &Backlash {
+                steps: [2.0, 0.0, 0.0],
+            },
+        );
+        let out: Vec<f64> = q.iter().map(|v| v[0]).collect();
         assert_eq!(out, vec![0.0, 0.0, 2.0, 2.0, 2.0, 1.0, 2.0]);
+        assert_eq!(q[2][1], 3.0, "no play on motor 2");
+    }
+
+    #[test]
+    fn delayed_steps_interpolate_in_one_pass() {
+        let mut rec = pcr_recording::Recording::default();
+        for k in 0..10 {
+            let mut r = pcr_recording::Row::new(k as f64 * 0.02, [k * 10, 0, -k]);
+            r.pose = [Some(0.0); 3];
+            rec.rows.push(r);
+        }
+        let s = Series::from_recording(&rec, "t").unwrap();
+        let d = delayed_steps(&s, 0.03);
+        assert_eq!(d[0], [0.0, 0.0, 0.0]);
+        assert!(
+            (d[5][0] - 35.0).abs() < 1e-9 && (d[5][2] + 3.5).abs() < 1e-9,
+            "{:?}",
+            d[5]
+        );
+        assert_eq!(delayed_steps(&s, -1.0)[3], [90.0, 0.0, -9.0]);
     }
 }
