@@ -83,6 +83,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         }
     }
     let start = load_robot(a.robot.as_deref())?;
+    let drawing = start.clone();
     let data = read_all(&a.data)?;
     let holdout = read_all(&a.holdout)?;
     // Calibrate first on the static poses of the data (never of the holdout).
@@ -140,7 +141,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         pcr_residuals::attribution::residual_table(&robot, &series, &blocks, &mut f)?;
     }
     let wall = std::time::Instant::now();
-    let res = attribute(&robot, &series, &blocks, &opts)?;
+    let res = attribute(&robot, &drawing, &series, &blocks, &opts)?;
     eprintln!("analysed in {:.2} s", wall.elapsed().as_secs_f64());
     println!(
         "held out: {} rows in {} blocks; before: position mean {:.3} / max {:.3} / RMS {:.3} mm, orientation RMS {:.3} deg",

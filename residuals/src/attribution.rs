@@ -27,6 +27,8 @@ pub struct Options {
     pub max_rounds: usize,
     /// Candidates tried (names of [`candidates::NAMES`]).
     pub candidates: Vec<String>,
+    /// Largest distance of the extended model's geometry from the drawing, mm or degrees.
+    pub max_geometry_change: f64,
 }
 
 impl Default for Options {
@@ -36,6 +38,7 @@ impl Default for Options {
             min_effect_mm: 0.01,
             max_rounds: 6,
             candidates: candidates::NAMES.iter().map(|s| s.to_string()).collect(),
+            max_geometry_change: 3.0,
         }
     }
 }
@@ -205,6 +208,13 @@ fn mark(scores: &mut [Score], round: usize, name: &str, note: String) {
 /// full model lowers the training error, re-linearised and refitted (Gauss-Newton) while that
 /// helps, then every effect's parameters refined together on the full model. `None` when the
 /// full model does not improve on the training rows.
+/// Smallest share of the held-out mean square above the capture noise that a candidate must
+/// explain to be claimed.
+pub const MIN_SHARE: f64 = 0.25;
+
+/// Largest number of Gauss-Newton steps when a candidate goes into the model.
+const GN_STEPS: usize = 10;
+
 fn accept<'a>(
     config: &RobotConfig,
     ctx: &Context<'a>,
@@ -217,7 +227,9 @@ fn accept<'a>(
     let start_sse = ctx.sse(&ctx.train(), None);
     let mut cur: Option<(RobotConfig, Context<'a>, f64)> = None;
     let mut step = Some(first);
-    for it in 0..4 {
+    // Damping carried from one step to the next (a step that needed 1/4 starts the next at 1/2).
+    let mut trust = 1.0f64;
+    for it in 0..GN_STEPS {
         let Some(f) = step.take() else { break };
         let (base_cfg, base_sse) = match &cur {
             Some((c, _, s)) => (c.clone(), *s),
@@ -226,26 +238,27 @@ fn accept<'a>(
         let mut full = base_cfg.clone();
         (f.change)(&mut full);
         let mut improved = false;
-        for frac in [1.0, 0.5, 0.25, 0.125] {
+        let mut frac = trust;
+        while frac >= 1.0 / 16.0 {
             let cand = crate::model::blend(&base_cfg, &full, frac);
-            if cand.validate("extended robot").is_err() {
-                continue;
+            let nctx = cand
+                .validate("extended robot")
+                .ok()
+                .and_then(|_| ExtendedModel::new(&cand).ok())
+                .map(|m| Context::new(series, m, blocks, w_phi))
+                .filter(|n| n.rows.len() + 5 >= ctx.rows.len());
+            if let Some(nctx) = nctx {
+                let sse = nctx.sse(&nctx.train(), None);
+                if sse < base_sse {
+                    cur = Some((cand, nctx, sse));
+                    improved = true;
+                    break;
+                }
             }
-            let Ok(model) = ExtendedModel::new(&cand) else {
-                continue;
-            };
-            let nctx = Context::new(series, model, blocks, w_phi);
-            if nctx.rows.len() + 5 < ctx.rows.len() {
-                continue;
-            }
-            let sse = nctx.sse(&nctx.train(), None);
-            if sse < base_sse {
-                cur = Some((cand, nctx, sse));
-                improved = true;
-                break;
-            }
+            frac *= 0.5;
         }
-        if !improved || !candidates::iterable(name) || it == 3 {
+        trust = (2.0 * frac).min(1.0);
+        if !improved || !candidates::iterable(name) || it + 1 == GN_STEPS {
             break;
         }
         let (_, c, s) = cur.as_ref()?;
@@ -340,6 +353,86 @@ fn effect_points(ctx: &Context, delta: &[[f64; 3]], test: &[usize]) -> Vec<(f64,
         .collect()
 }
 
+/// Why a model is not a physical explanation, if it is not: its geometry more than
+/// `max_geometry_change` (mm, deg) away from the drawing the analysis started from (the
+/// calibration parameters would then only mimic another cause), or springs, creep or a latency
+/// of the wrong sign.
+fn unphysical(
+    c: &RobotConfig,
+    current: &RobotConfig,
+    drawing: &RobotConfig,
+    opts: &Options,
+) -> Option<String> {
+    let lim = opts.max_geometry_change;
+    let params = |l: &pcr_robot::LegConfig| {
+        [
+            ("psi_deg", l.psi_deg),
+            ("l_c_mm", l.l_c_mm),
+            ("r_p_mm", l.r_p_mm),
+            ("theta_p_deg", l.theta_p_deg),
+            ("l_st_mm", l.l_st_mm),
+            ("r_base_mm", l.r_base_mm),
+            ("beta_deg", l.beta_deg),
+        ]
+    };
+    let mut why = Vec::new();
+    for i in 0..3 {
+        let (n, o, d) = (
+            params(&c.legs[i]),
+            params(&current.legs[i]),
+            params(&drawing.legs[i]),
+        );
+        for k in 0..n.len() {
+            let (away, before) = ((n[k].1 - d[k].1).abs(), (o[k].1 - d[k].1).abs());
+            // Too far from the drawing, and further than the model already was.
+            if away > lim && away > before + 0.1 * lim {
+                why.push(format!(
+                    "{}[{}] {:+.2} from the drawing",
+                    n[k].0,
+                    i + 1,
+                    n[k].1 - d[k].1
+                ));
+            }
+        }
+    }
+    let e = &c.effects;
+    if let Some(f) = &e.frame {
+        // A registration off by more than this would be seen at once: 1 deg is 5 mm at the
+        // base points.
+        if f.dx_mm.hypot(f.dy_mm) > lim || f.dphi_deg.abs() > lim / 3.0 {
+            why.push(format!(
+                "a capture frame off by ({:.2}, {:.2}) mm and {:.2} deg",
+                f.dx_mm, f.dy_mm, f.dphi_deg
+            ));
+        }
+    }
+    if let Some(k) = &e.compliance {
+        if k.k_m_n_mm_per_rad < 0.0 || k.k_p_n_mm_per_rad < 0.0 {
+            why.push(format!(
+                "negative joint springs (k_M {:.1}, k_P {:.1} N mm/rad)",
+                k.k_m_n_mm_per_rad, k.k_p_n_mm_per_rad
+            ));
+        }
+    }
+    if let Some(cr) = &e.creep {
+        if cr.gain.iter().any(|g| *g < 0.0) {
+            why.push(format!(
+                "a tendon that shortens under load (creep gains {:?})",
+                cr.gain
+            ));
+        }
+    }
+    if let Some(l) = &e.latency {
+        if l.latency_s < -0.01 {
+            why.push(format!(
+                "the motion leads the command by {:.3} s",
+                -l.latency_s
+            ));
+        }
+    }
+    (!why.is_empty()).then(|| format!("unphysical: {}", why.join(", ")))
+}
+
 fn rms(sse: f64, n: usize) -> f64 {
     (sse / n.max(1) as f64).sqrt()
 }
@@ -358,6 +451,9 @@ fn score(
     blocks: &Blocks,
     opts: &Options,
     n_candidates: usize,
+    geometry_gain_ms: Option<f64>,
+    geometry_significant: bool,
+    noise_ms: f64,
 ) -> Score {
     let nb = blocks.len();
     let raw: f64 = sse_per_block(ctx, test, None, nb).iter().sum();
@@ -386,6 +482,36 @@ fn score(
     }
     if delta_bic >= 0.0 {
         note.push(format!("BIC does not improve ({delta_bic:+.1})"));
+    }
+    // A cause explains a good part of the structure it is tested on; a candidate that only
+    // projects a little of an unknown cause is not claimed.
+    let excess = sa / test.len().max(1) as f64 - noise_ms;
+    let share = if excess > 0.0 { red / excess } else { 0.0 };
+    if share < MIN_SHARE {
+        note.push(format!(
+            "explains {:.0} % of the structured residual (< {:.0} %)",
+            100.0 * share,
+            100.0 * MIN_SHARE
+        ));
+    }
+    // Parsimony: an effect that alone (without the recalibration) gains at least 90 % of what
+    // the recalibration gains, significantly, is the simpler explanation of the same residual.
+    if !note.is_empty() {
+        if let (Some(alone), Some(geo)) = (&f.alone, geometry_gain_ms) {
+            let c = sse_per_block(ctx, test, Some(alone), nb);
+            let raw_b = sse_per_block(ctx, test, None, nb);
+            let sc: f64 = c.iter().sum();
+            let gain = (raw - sc) / test.len().max(1) as f64;
+            let pa = paired_p(&raw_b, &c, &blocks.held_out);
+            if geometry_significant
+                && geo > 0.0
+                && gain >= 0.9 * geo
+                && pa < alpha
+                && gain.sqrt() >= opts.min_effect_mm
+            {
+                note.clear();
+            }
+        }
     }
     Score {
         round,
@@ -419,10 +545,12 @@ pub fn residual_table(
     features::write_csv(&ctx, &feats, out).map_err(|e| AttributionError::Data(e.to_string()))
 }
 
-/// Runs the attribution: starting from `start` (the calibrated robot), on `series` with
-/// `blocks`.
+/// Runs the attribution: starting from `start` (the calibrated robot; `drawing` is the robot
+/// file the analysis began with, whose geometry a plausible explanation stays near), on `series`
+/// with `blocks`.
 pub fn attribute(
     start: &RobotConfig,
+    drawing: &RobotConfig,
     series: &[Series],
     blocks: &Blocks,
     opts: &Options,
@@ -439,6 +567,11 @@ pub fn attribute(
         )));
     }
     let before = Errors::of(&ctx0, &test0);
+    // What the capture noise explains of a row's weighted mean square (mm^2).
+    let noise_ms = series
+        .iter()
+        .find_map(|s| s.row_noise)
+        .map_or(0.0, |n| n[0] * n[0] + n[1] * n[1] + (w_phi * n[2]).powi(2));
     let mut ctx = ctx0;
     let mut scores = Vec::new();
     let mut added: Vec<Added> = Vec::new();
@@ -455,10 +588,23 @@ pub fn attribute(
         // The reference for the effects: the recalibration (geometry) fit; for geometry itself,
         // the model as it is.
         let mut geo = candidates::geometry(&ctx, &train);
-        let geo_delta = geo.as_ref().map(|g| g.delta.clone());
-        let geo_sse = geo.as_ref().map_or(ctx.sse(&train, None), |g| g.train_sse);
-        let geo_k = geo.as_ref().map_or(0, |g| g.k);
+        // A recalibration that would leave the drawing only mimics another cause: it is then no
+        // reference (the effects are measured against the model as it is).
+        let geo_physical = geo.as_ref().is_some_and(|g| {
+            let mut probe = config.clone();
+            (g.change)(&mut probe);
+            unphysical(&probe, &config, drawing, opts).is_none()
+        });
+        let reference = geo.as_ref().filter(|_| geo_physical);
+        let geo_delta = reference.map(|g| g.delta.clone());
+        let geo_sse = reference.map_or(ctx.sse(&train, None), |g| g.train_sse);
+        let geo_k = reference.map_or(0, |g| g.k);
+        let geo_gain_ms = geo_delta
+            .as_ref()
+            .map(|d| (ctx.sse(&test, None) - ctx.sse(&test, Some(d))) / test.len().max(1) as f64);
         let mut fits: Vec<(Fitted, Score)> = Vec::new();
+        // `geometry` is scored first: the parsimony rule of the effects needs its verdict.
+        let mut geo_significant = false;
         for name in &names {
             let fitted = if name.as_str() == "geometry" {
                 geo.take()
@@ -488,6 +634,9 @@ pub fn attribute(
                     blocks,
                     opts,
                     names.len(),
+                    None,
+                    false,
+                    noise_ms,
                 )
             } else {
                 score(
@@ -502,8 +651,27 @@ pub fn attribute(
                     blocks,
                     opts,
                     names.len(),
+                    geo_gain_ms,
+                    geo_significant,
+                    noise_ms,
                 )
             };
+            let mut s = s;
+            // The model the candidate would make must be physical: its geometry near the drawing,
+            // its springs and creep positive.
+            let mut probe = config.clone();
+            (f.change)(&mut probe);
+            if let Some(why) = unphysical(&probe, &config, drawing, opts) {
+                if s.significant {
+                    s.significant = false;
+                    s.note = why;
+                } else {
+                    s.note = format!("{}; {why}", s.note);
+                }
+            }
+            if f.name == "geometry" {
+                geo_significant = s.significant;
+            }
             scores.push(s.clone());
             fits.push((f, s));
         }
@@ -565,7 +733,6 @@ pub fn attribute(
     // What remains: against the noise, and the features it follows.
     let noise = series.iter().find_map(|s| s.row_noise);
     let remaining_ms = ctx.sse(&test, None) / test.len().max(1) as f64;
-    let noise_ms = noise.map_or(0.0, |n| n[0] * n[0] + n[1] * n[1] + (w_phi * n[2]).powi(2));
     let excess = (remaining_ms - noise_ms).max(0.0).sqrt();
     let feats = Features::of(&ctx);
     let links = features::links(&ctx, &feats, &train, &test);

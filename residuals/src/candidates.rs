@@ -68,6 +68,9 @@ pub struct Fitted {
     pub k: usize,
     /// Predicted change of the residual of every row (effect and nuisance).
     pub delta: Vec<[f64; 3]>,
+    /// The effect's change alone, fitted without the nuisance (`None` for `geometry`): when it
+    /// covers what a recalibration gains, the physical effect is preferred to the recalibration.
+    pub alone: Option<Vec<[f64; 3]>>,
     /// Training SSE after the fit.
     pub train_sse: f64,
     /// What it writes into the robot file.
@@ -112,12 +115,38 @@ fn fit_joint(
     n_e: usize,
     effect: &dyn Fn(usize, &mut Columns),
     offset: Option<&[[f64; 3]]>,
-) -> Option<(linear::LinearFit, Vec<[f64; 3]>)> {
-    let n = n_e + nui.n;
-    let table = ctx.nuisance();
+) -> Option<(linear::LinearFit, Vec<[f64; 3]>, Option<Vec<[f64; 3]>>)> {
+    let n_g = nui.n;
+    let n = n_e + n_g;
+    let mut prior = vec![0.0; n_e];
+    prior.extend(nui.prior().into_iter().take(n_g));
+    if n == 0 {
+        // Nothing free: the offset alone (a profiled effect without the nuisance).
+        let o = offset?;
+        let sse = ctx.sse(train, Some(o));
+        return Some((
+            linear::LinearFit {
+                x: Vec::new(),
+                std: Vec::new(),
+                sse,
+            },
+            o.to_vec(),
+            Some(o.to_vec()),
+        ));
+    }
+    let alone = match offset {
+        Some(o) => Some(o.to_vec()),
+        None if n_e > 0 => {
+            linear::solve(ctx, train, n_e, effect).map(|f| linear::deltas(ctx, n_e, &f.x, effect))
+        }
+        None => None,
+    };
+    let table = (n_g > 0).then(|| ctx.nuisance());
     let cols = |i: usize, c: &mut Columns| {
         effect(i, c);
-        c[n_e..n].copy_from_slice(&table.cols[i]);
+        if let Some(t) = &table {
+            c[n_e..n].copy_from_slice(&t.cols[i]);
+        }
     };
     // Residual with the offset taken out: solve on a shifted context copy of r.
     let fit = match offset {
@@ -128,9 +157,9 @@ fn fit_joint(
                     row.r[k] -= d[k];
                 }
             }
-            linear::solve(&shifted, train, n, &cols)?
+            linear::solve_with_prior(&shifted, train, n, &cols, Some(&prior))?
         }
-        None => linear::solve(ctx, train, n, &cols)?,
+        None => linear::solve_with_prior(ctx, train, n, &cols, Some(&prior))?,
     };
     let mut delta = linear::deltas(ctx, n, &fit.x, &cols);
     if let Some(o) = offset {
@@ -140,18 +169,22 @@ fn fit_joint(
             }
         }
     }
-    Some((fit, delta))
+    Some((fit, delta, alone))
 }
 
 /// Applies the nuisance part (after `n_e` effect parameters) of a joint fit to a config.
 fn nuisance_change(nui: Nuisance, x: Vec<f64>, n_e: usize) -> impl Fn(&mut RobotConfig) {
-    move |c: &mut RobotConfig| nui.apply(&x[n_e..], c)
+    move |c: &mut RobotConfig| {
+        if x.len() > n_e {
+            nui.apply(&x[n_e..], c)
+        }
+    }
 }
 
 /// `geometry`: the calibration parameters refitted on every training row.
 pub fn geometry(ctx: &Context, train: &[usize]) -> Option<Fitted> {
     let nui = ctx.nuisance().nui.clone();
-    let (fit, delta) = fit_joint(ctx, &nui, train, 0, &|_, _| {}, None)?;
+    let (fit, delta, alone) = fit_joint(ctx, &nui, train, 0, &|_, _| {}, None)?;
     let params = nui
         .names()
         .iter()
@@ -167,6 +200,7 @@ pub fn geometry(ctx: &Context, train: &[usize]) -> Option<Fitted> {
         params,
         k,
         delta,
+        alone,
         train_sse: sse,
         change: Box::new(move |c| nui.apply(&x, c)),
     })
@@ -184,7 +218,7 @@ pub fn frame(ctx: &Context, train: &[usize]) -> Option<Fitted> {
         c[1] = [0.0, -1.0, 0.0];
         c[2] = [m[1], -m[0], -ctx.w_phi];
     };
-    let (fit, delta) = fit_joint(ctx, &nui, train, 3, &effect, None)?;
+    let (fit, delta, alone) = fit_joint(ctx, &nui, train, 3, &effect, None)?;
     let prev = ctx
         .model
         .config
@@ -212,6 +246,7 @@ pub fn frame(ctx: &Context, train: &[usize]) -> Option<Fitted> {
         params,
         k: 3,
         delta,
+        alone,
         train_sse: fit.sse,
         change: Box::new(move |c| {
             c.effects.frame = Some(f.clone());
@@ -337,13 +372,14 @@ pub fn latency(ctx: &Context, train: &[usize]) -> Option<Fitted> {
     let std = profile_std(sse, 3 * rows.len(), curv);
     let nui = ctx.nuisance().nui.clone();
     let off = shift(tau, None);
-    let (fit, delta) = fit_joint(ctx, &nui, train, 0, &|_, _| {}, Some(&off))?;
+    let (fit, delta, alone) = fit_joint(ctx, &nui, train, 0, &|_, _| {}, Some(&off))?;
     let nuis = nuisance_change(nui, fit.x.clone(), 0);
     Some(Fitted {
         name: "latency",
         params: vec![est("latency", tau, std, "s")],
         k: 1,
         delta,
+        alone,
         train_sse: fit.sse,
         change: Box::new(move |c| {
             c.effects.latency = Some(Latency { latency_s: tau });
@@ -391,7 +427,7 @@ pub fn backlash(ctx: &Context, train: &[usize]) -> Option<Fitted> {
     }
     let nui = ctx.nuisance().nui.clone();
     let off = delta_of(b, None);
-    let (fit, delta) = fit_joint(ctx, &nui, train, 0, &|_, _| {}, Some(&off))?;
+    let (fit, delta, alone) = fit_joint(ctx, &nui, train, 0, &|_, _| {}, Some(&off))?;
     let nuis = nuisance_change(nui, fit.x.clone(), 0);
     Some(Fitted {
         name: "backlash",
@@ -400,6 +436,7 @@ pub fn backlash(ctx: &Context, train: &[usize]) -> Option<Fitted> {
             .collect(),
         k: 3,
         delta,
+        alone,
         train_sse: fit.sse,
         change: Box::new(move |c| {
             c.effects.backlash = Some(Backlash { steps: b });
@@ -457,7 +494,7 @@ pub fn creep(ctx: &Context, train: &[usize]) -> Option<Fitted> {
     let t_c = lt.exp();
     let std_t = profile_std(sse, 3 * rows.len(), curv).map(|s| s * t_c);
     let l = lag(t_c);
-    let (fit, delta) = fit_joint(ctx, &nui, train, 3, &|i, c| effect_for(&l, i, c), None)?;
+    let (fit, delta, alone) = fit_joint(ctx, &nui, train, 3, &|i, c| effect_for(&l, i, c), None)?;
     let gain = [fit.x[0], fit.x[1], fit.x[2]];
     let mut params: Vec<Estimate> = (0..3)
         .map(|m| {
@@ -477,6 +514,7 @@ pub fn creep(ctx: &Context, train: &[usize]) -> Option<Fitted> {
         params,
         k: 4,
         delta,
+        alone,
         train_sse: fit.sse,
         change: Box::new(move |c| {
             c.effects.creep = Some(Creep {
@@ -520,7 +558,7 @@ fn loaded(ctx: &Context, train: &[usize], name: &'static str, which: &[usize]) -
         }
     };
     let nui = ctx.nuisance().nui.clone();
-    let (fit, delta) = fit_joint(ctx, &nui, train, n_e, &effect, None)?;
+    let (fit, delta, alone) = fit_joint(ctx, &nui, train, n_e, &effect, None)?;
     let mut v = [0.0; 5];
     let mut sd = [None; 5];
     for (a, &j) in which.iter().enumerate() {
@@ -552,6 +590,7 @@ fn loaded(ctx: &Context, train: &[usize], name: &'static str, which: &[usize]) -
         params,
         k: n_e,
         delta,
+        alone,
         train_sse: fit.sse,
         change: Box::new(move |c| {
             c.effects.compliance = Some(new.clone());
@@ -596,7 +635,7 @@ pub fn tendon_map(ctx: &Context, train: &[usize]) -> Option<Fitted> {
         }
     };
     let nui = ctx.nuisance().nui.clone();
-    let (fit, delta) = fit_joint(ctx, &nui, train, 3 * NB, &effect, None)?;
+    let (fit, delta, alone) = fit_joint(ctx, &nui, train, 3 * NB, &effect, None)?;
     // The displacement range of the data, per leg.
     let mut range = [[f64::INFINITY, f64::NEG_INFINITY]; 3];
     for row in &ctx.rows {
@@ -627,6 +666,7 @@ pub fn tendon_map(ctx: &Context, train: &[usize]) -> Option<Fitted> {
         params,
         k: 3 * NB,
         delta,
+        alone,
         train_sse: fit.sse,
         change: Box::new(move |c| {
             nuis(c);
@@ -644,7 +684,10 @@ pub fn tendon_map(ctx: &Context, train: &[usize]) -> Option<Fitted> {
                         (dl, current.kappa(dl) + corr(dl))
                     })
                     .collect();
-                if let Some(spec) = best_family(&target) {
+                // The new map must stay invertible over the data's range, or it is not used.
+                if let Some(spec) = best_family(&target).filter(|spec| {
+                    pcr_calibration::step1::is_monotonic(&TendonMap::from_spec(spec), lo, hi)
+                }) {
                     c.legs[leg].tendon_map = spec;
                 }
             }
@@ -764,7 +807,7 @@ pub fn periodic(ctx: &Context, train: &[usize]) -> Option<Fitted> {
         c[1] = col.map(|v| v * cs);
     };
     let nui = ctx.nuisance().nui.clone();
-    let (fit, delta) = fit_joint(ctx, &nui, train, 2, &effect, None)?;
+    let (fit, delta, alone) = fit_joint(ctx, &nui, train, 2, &effect, None)?;
     // Output = q - A sin(w q + phase): the residual change is -A(sin cos(ph) + cos sin(ph)).
     let (a_s, a_c) = (-fit.x[0], -fit.x[1]);
     let amp = a_s.hypot(a_c);
@@ -792,6 +835,7 @@ pub fn periodic(ctx: &Context, train: &[usize]) -> Option<Fitted> {
         ],
         k: 4,
         delta,
+        alone,
         train_sse: fit.sse,
         change: Box::new(move |c| {
             c.effects.periodic.push(entry.clone());

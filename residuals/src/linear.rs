@@ -29,6 +29,19 @@ pub fn solve(
     n: usize,
     cols: &dyn Fn(usize, &mut Columns),
 ) -> Option<LinearFit> {
+    solve_with_prior(ctx, idx, n, cols, None)
+}
+
+/// [`solve`] with a zero-mean Gaussian prior on the parameters: `prior[j]` = 1 / sigma_j^2
+/// (0 = free), added to the normal equations (a ridge; each Gauss-Newton step stays where the
+/// linearisation holds).
+pub fn solve_with_prior(
+    ctx: &Context,
+    idx: &[usize],
+    n: usize,
+    cols: &dyn Fn(usize, &mut Columns),
+    prior: Option<&[f64]>,
+) -> Option<LinearFit> {
     if n == 0 || idx.is_empty() {
         return None;
     }
@@ -50,6 +63,11 @@ pub fn solve(
     for a in 0..n {
         for b in 0..a {
             ata[(a, b)] = ata[(b, a)];
+        }
+    }
+    if let Some(p) = prior {
+        for (a, w) in p.iter().enumerate().take(n) {
+            ata[(a, a)] += w;
         }
     }
     // Scale columns for conditioning.
@@ -228,6 +246,22 @@ impl Nuisance {
                 ];
             }
         }
+    }
+
+    /// The prior of the nuisance parameters (1 / sigma^2, column order): the calibration has
+    /// placed them, so one step moves the geometry by about a millimetre or a degree and a map
+    /// coefficient by about 5 % of its value.
+    pub fn prior(&self) -> Vec<f64> {
+        let mut p = Vec::with_capacity(self.n);
+        for leg in 0..3 {
+            p.extend([1.0; GEO.len()]);
+            let coeffs = &self.cfg[leg].tendon_map.coeffs;
+            for j in 0..self.n_map[leg] {
+                let c = coeffs.get(j).copied().unwrap_or(1e-3).abs().max(1e-6);
+                p.push(1.0 / (0.05 * c).powi(2));
+            }
+        }
+        p
     }
 
     /// The columns of every row of a context, computed once.

@@ -80,7 +80,7 @@ fn analyse(truth: &RobotConfig, model: &RobotConfig, seconds: f64) -> pcr_residu
     let rec = record(truth, seconds, 0.05, 7);
     let s = vec![Series::from_recording(&rec, "synthetic").unwrap()];
     let b = Blocks::in_time(&s, 2.0, 3);
-    attribute(model, &s, &b, &Options::default()).unwrap()
+    attribute(model, model, &s, &b, &Options::default()).unwrap()
 }
 
 #[test]
