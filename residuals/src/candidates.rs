@@ -106,6 +106,9 @@ pub fn describe(name: &str) -> &'static str {
     }
 }
 
+/// A joint fit: the solution, every row's change, and the effect's change alone.
+type JointFit = (linear::LinearFit, Vec<[f64; 3]>, Option<Vec<[f64; 3]>>);
+
 /// Fits with the nuisance: effect columns first, then the calibration parameters. `offset` is a
 /// fixed change of the residual (an effect with no free linear parameter at the chosen value).
 fn fit_joint(
@@ -115,7 +118,7 @@ fn fit_joint(
     n_e: usize,
     effect: &dyn Fn(usize, &mut Columns),
     offset: Option<&[[f64; 3]]>,
-) -> Option<(linear::LinearFit, Vec<[f64; 3]>, Option<Vec<[f64; 3]>>)> {
+) -> Option<JointFit> {
     let n_g = nui.n;
     let n = n_e + n_g;
     let mut prior = vec![0.0; n_e];
