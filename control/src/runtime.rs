@@ -96,9 +96,22 @@ impl SimChain {
         plant_cfg: &PlantConfig,
         period_s: f64,
     ) -> Result<Self, SimChainError> {
-        let robot = Robot::new(robot_cfg).map_err(|e| SimChainError::Robot(e.to_string()))?;
-        let (drive, sensor) =
-            plant_backend(robot_cfg, plant_cfg).map_err(|e| SimChainError::Plant(e.to_string()))?;
+        Self::simulated_on(robot_cfg, robot_cfg, plant_cfg, period_s)
+    }
+
+    /// The chain driven by the model `model_cfg` (planner, IK, safety limits: e.g. a calibrated
+    /// robot) on a plant whose nominal geometry is `plant_robot_cfg` with the deviations of
+    /// `plant_cfg` on top (the truth, which does not change when the model does), at
+    /// `period_s`, starting at the plant's home motor positions.
+    pub fn simulated_on(
+        model_cfg: &RobotConfig,
+        plant_robot_cfg: &RobotConfig,
+        plant_cfg: &PlantConfig,
+        period_s: f64,
+    ) -> Result<Self, SimChainError> {
+        let robot = Robot::new(model_cfg).map_err(|e| SimChainError::Robot(e.to_string()))?;
+        let (drive, sensor) = plant_backend(plant_robot_cfg, plant_cfg)
+            .map_err(|e| SimChainError::Plant(e.to_string()))?;
         let drive = safety_stack(drive, &robot, 5.0 * period_s);
         Ok(InProcessChain::new(
             InterpolatorStep::new(
@@ -110,6 +123,13 @@ impl SimChain {
             CorrectionStep::pass_through(),
             period_s,
         ))
+    }
+}
+
+impl SimChain {
+    /// The plant drive inside the safety stack (true state, last capture sample's M_i).
+    pub fn plant_drive(&self) -> &PlantDrive {
+        self.driver.driver().inner().inner().inner()
     }
 }
 
