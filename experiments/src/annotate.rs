@@ -14,9 +14,12 @@
 //!   whose planned pose differs ends the dwell and the visit; the next visit is looked for from
 //!   there. All other rows (approach, return) are unlabelled, with `settled = 0`. A pause
 //!   (planned pose held away from the target) starts no dwell; a pause in a dwell lengthens it.
-//! - **paths**: a row whose planned pose lies on the next path's geometry (circle or square,
-//!   within the tolerances) is labelled `segment = circle|square`; the first row off it after it
-//!   was entered closes that path.
+//! - **paths**: the next path is entered at the first row whose planned pose is at the path's
+//!   start point (the circle's `centre + (r, 0)`, the square's corner `(+s/2, -s/2)`); from
+//!   there every row whose planned pose lies on the path's geometry (within the tolerances) is
+//!   labelled `segment = circle|square`, and the first row off it closes the path. (Entering
+//!   only at the start point keeps another path's approach or return, which may cross the
+//!   path elsewhere, unlabelled.)
 //! - **backlash blocks** (motor i, n steps, `periods` periods): a block starts at the first row
 //!   whose commanded q differs from the home positions only on motor i, by 1..=n steps upwards;
 //!   its rows carry `motor = i`, `amplitude_steps = n` until the row on which motor i is back
@@ -286,7 +289,19 @@ impl Annotator {
             self.next += 1;
             self.phase = Phase::Waiting;
         }
-        if on(self.next) {
+        // A path is entered at its start point only (another path's approach or return may
+        // cross it elsewhere, e.g. the circle's return crosses the square's side at (25, 0)).
+        let at_start = |k: usize| {
+            paths.get(k).is_some_and(|s| {
+                let a = s.start();
+                planned.is_some_and(|p| {
+                    (p[0] - a[0]).abs() <= tol_mm
+                        && (p[1] - a[1]).abs() <= tol_mm
+                        && (p[2] - s.phi_deg()).abs() <= tol_deg
+                })
+            })
+        };
+        if on(self.next) && (self.phase == Phase::OnPath || at_start(self.next)) {
             self.phase = Phase::OnPath;
             return Label {
                 segment: Some(paths[self.next].name()),

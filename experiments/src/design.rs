@@ -258,6 +258,27 @@ impl PathShape {
         }
     }
 
+    /// Where the path starts (x mm, y mm): the circle at `centre + (radius, 0)` (as
+    /// `pcr_control::Move::Circle` does), the square at its corner `centre + (side/2, -side/2)`
+    /// (as `pcr_control::paper_square` does).
+    pub fn start(&self) -> [f64; 2] {
+        match *self {
+            PathShape::Circle {
+                centre, radius_mm, ..
+            } => [centre[0] + radius_mm, centre[1]],
+            PathShape::Square {
+                centre, side_mm, ..
+            } => [centre[0] + 0.5 * side_mm, centre[1] - 0.5 * side_mm],
+        }
+    }
+
+    /// The orientation of the path, deg.
+    pub fn phi_deg(&self) -> f64 {
+        match *self {
+            PathShape::Circle { phi_deg, .. } | PathShape::Square { phi_deg, .. } => phi_deg,
+        }
+    }
+
     /// Whether a planned pose (x mm, y mm, phi deg) lies on the path within the tolerances.
     pub fn contains(&self, p: [f64; 3], tol_mm: f64, tol_deg: f64) -> bool {
         match *self {

@@ -225,7 +225,7 @@ pub fn run_in_process<W: Write>(
                     what: cmd.describe(),
                 });
             }
-            if k % 256 == 0 && duration > 0.0 {
+            if k.is_multiple_of(256) && duration > 0.0 {
                 let f = ((chain.time_s() - t_start) / duration).min(1.0);
                 progress((c as f64 + f) / n_cmd as f64);
             }
