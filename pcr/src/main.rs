@@ -5,6 +5,7 @@
 use clap::{Parser, Subcommand};
 
 mod csvio;
+mod experiment;
 mod figures_kin;
 mod figures_plan;
 mod kin;
@@ -34,6 +35,9 @@ enum Command {
     Plan(plan::Args),
     /// Static poses and time-stepped runs of the simulated plant.
     Plant(plant::Args),
+    /// The paper's experiments (calibration, repeatability, paths, backlash) on the in-process
+    /// chain against the simulated plant, and the calibration pose set.
+    Experiment(experiment::Args),
 }
 
 fn main() -> std::process::ExitCode {
@@ -52,6 +56,7 @@ fn main() -> std::process::ExitCode {
         Command::Profile(a) => profile::run(a),
         Command::Plan(a) => plan::run(a),
         Command::Plant(a) => plant::run(a),
+        Command::Experiment(a) => experiment::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
