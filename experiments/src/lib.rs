@@ -43,7 +43,7 @@ pub use figure::{calibration_set_svg, FigureError};
 #[cfg(feature = "chain")]
 pub use program::{program_of, Program, ProgramCommand, ProgramError, LEAD_IN_S};
 #[cfg(feature = "chain")]
-pub use runner::{run_in_process, RunSetup, RunSummary, RunnerError};
+pub use runner::{row_of_state, run_in_process, RunSetup, RunSummary, RunnerError};
 
 /// Every column an experiment recording has: the format's 20 known columns, then
 /// [`EXTRA_COLUMNS`].

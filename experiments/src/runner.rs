@@ -114,11 +114,12 @@ pub enum RunnerError {
     },
 }
 
-/// The recording's row of a cycle: time from the cycle index, commanded steps, measured pose
-/// (if the capture saw the platform), M_i, planned pose. Positions rounded to 1e-4 mm, angles
-/// to 1e-5 deg.
-fn row_of(k: u64, period_s: f64, st: &DriverStateMsg, joints: [Option<Vec2>; 3]) -> Row {
-    let mut row = Row::new(round_dec(k as f64 * period_s, 6), st.commanded);
+/// The recording's row of a driver cycle at recording time `t_s`: commanded steps, measured
+/// pose (if the capture saw the platform this cycle), the captured M_i (`joints`, robot frame),
+/// the planned pose; positions rounded to 1e-4 mm, angles to 1e-5 deg. Unlabelled: pass it to
+/// [`crate::Annotator::annotate`]. The supervisor can build its rows of a live run the same way.
+pub fn row_of_state(t_s: f64, st: &DriverStateMsg, joints: [Option<Vec2>; 3]) -> Row {
+    let mut row = Row::new(t_s, st.commanded);
     let mm = |v: f64| Some(round_dec(v, 4));
     let deg = |v: f64| Some(round_dec(v.to_degrees(), 5));
     let m = st.measured;
@@ -206,7 +207,8 @@ pub fn run_in_process<W: Write>(
                 t_s,
                 message: e.to_string(),
             })?;
-            let mut row = row_of(k, setup.period_s, &o.state, chain.plant_drive().joints());
+            let t_row = round_dec(k as f64 * setup.period_s, 6);
+            let mut row = row_of_state(t_row, &o.state, chain.plant_drive().joints());
             k += 1;
             let label = ann.annotate(&mut row);
             let cells = label.extra_cells();
