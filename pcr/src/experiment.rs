@@ -204,10 +204,10 @@ struct BacklashArgs {
     #[arg(long, default_value_t = 1.0, value_name = "S")]
     rest: f64,
     /// Acceleration of the joint moves, steps/s^2.
-    #[arg(long, default_value_t = 1.0e5)]
+    #[arg(long, default_value_t = 1.0e6)]
     joint_acceleration: f64,
     /// Jerk of the joint moves, steps/s^3.
-    #[arg(long, default_value_t = 1.0e7)]
+    #[arg(long, default_value_t = 1.0e9)]
     joint_jerk: f64,
 }
 
