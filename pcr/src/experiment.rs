@@ -417,6 +417,10 @@ fn execute(design: Design, run: &RunArgs, src: Sources) -> Result<()> {
         tolerances: Tolerances::default(),
     };
     let out_name = run.out.display().to_string();
+    if let Some(dir) = run.out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("--out {out_name}: cannot create its folder"))?;
+    }
     let file = std::fs::File::create(&run.out)
         .with_context(|| format!("--out {out_name}: cannot create the file"))?;
     let pb = ProgressBar::new(1000);

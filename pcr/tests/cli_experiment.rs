@@ -99,7 +99,8 @@ fn design_calibration_writes_the_189_poses_and_the_figure() {
 #[test]
 fn a_reduced_calibration_run_records_one_settled_group_per_pose() {
     let d = tempfile::tempdir().unwrap();
-    let out = d.path().join("cal.csv");
+    // (the output's folder is created)
+    let out = d.path().join("new").join("cal.csv");
     let mut args = vec![
         "experiment",
         "calibration",
@@ -269,6 +270,10 @@ fn bad_input_is_refused_naming_the_file_or_option() {
         ]),
         &["--robot nope-robot.toml"],
     );
+    // an output whose folder is a file
+    let blocker = d.path().join("file");
+    std::fs::write(&blocker, "").unwrap();
+    let bad_out = blocker.join("x.csv");
     fails_with(
         &pcr(&[
             "experiment",
@@ -276,9 +281,9 @@ fn bad_input_is_refused_naming_the_file_or_option() {
             "--config",
             "configs/sim.toml",
             "--out",
-            "/nonexistent-dir/x.csv",
+            s(&bad_out),
         ]),
-        &["--out /nonexistent-dir/x.csv"],
+        &[&format!("--out {}", bad_out.display())],
     );
     // a config without a simulated plant
     fails_with(
