@@ -323,7 +323,8 @@ impl Annotator {
         let Some(b) = blocks.get(self.next) else {
             return Label::default();
         };
-        let i = usize::from(b.motor - 1);
+        // (motors are 1..=3 in a design built by BacklashDesign::new)
+        let i = usize::from(b.motor.clamp(1, 3) - 1);
         let n = i64::from(b.amplitude_steps);
         let others_home = (0..3).all(|j| j == i || q[j] == home[j]);
         let d = i64::from(q[i]) - i64::from(home[i]);

@@ -161,6 +161,12 @@ fn backlash_program(b: &BacklashDesign, robot: &RobotConfig) -> Result<Program, 
         *r *= 1.0 - 1e-6;
     }
     let home = b.home_steps.map(i64::from);
+    if !(o.freq_hz.is_finite() && o.freq_hz > 0.0 && o.periods > 0) {
+        return Err(ProgramError::Backlash(format!(
+            "{} periods at {} Hz",
+            o.periods, o.freq_hz
+        )));
+    }
     let half = 0.5 / o.freq_hz;
     let mut atoms = vec![lead_in()];
     atoms.push((
@@ -173,6 +179,12 @@ fn backlash_program(b: &BacklashDesign, robot: &RobotConfig) -> Result<Program, 
     // The home move and the first block's first period go into separate commands.
     let mut prog = pack(atoms);
     for blk in &b.blocks {
+        if !(1..=3).contains(&blk.motor) || blk.amplitude_steps == 0 {
+            return Err(ProgramError::Backlash(format!(
+                "block of motor {} with {} steps: motors are 1..=3, steps >= 1",
+                blk.motor, blk.amplitude_steps
+            )));
+        }
         let i = usize::from(blk.motor - 1);
         let mut top = home;
         top[i] += i64::from(blk.amplitude_steps);

@@ -159,6 +159,12 @@ pub fn run_in_process<W: Write>(
     out: W,
     progress: &mut dyn FnMut(f64),
 ) -> Result<RunSummary, RunnerError> {
+    if !(setup.period_s.is_finite() && setup.period_s > 0.0) {
+        return Err(RunnerError::Chain(format!(
+            "control period {} s (must be > 0)",
+            setup.period_s
+        )));
+    }
     let program = program_of(design, &setup.model)?;
     let mut chain = SimChain::simulated_on(
         &setup.model,
