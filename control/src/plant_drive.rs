@@ -4,13 +4,15 @@
 //! backlash, creep and friction) and keeps the latest motion-capture sample it reports;
 //! [`PlantSensor`] hands that sample to the driver step as the measured pose. The capture sample
 //! is mapped into the robot frame with the plant's capture transform (what a registration would
-//! find; the correction step may refine it).
+//! find; the correction step may refine it). The passive joints M_i of the same samples are kept
+//! too ([`PlantDrive::joints`]) for the experiment runners, which record them.
 
 use crate::drive::PoseSensor;
 use pcr_driver::{Driver, DriverError, DriverState, MotorCommand};
 use pcr_kinematics::Pose;
 use pcr_plant::{Frame, Plant, PlantConfig, PlantError};
 use pcr_robot::RobotConfig;
+use pcr_robot::Vec2;
 use std::cell::Cell;
 use std::rc::Rc;
 
@@ -19,6 +21,8 @@ pub struct PlantDrive {
     plant: Plant,
     frame: Frame,
     last: Rc<Cell<Option<Pose>>>,
+    /// M_i of the capture samples of the last `read`, robot frame.
+    joints: [Option<Vec2>; 3],
     /// The caller's time at the first call: the plant's clock starts there (a process's clock
     /// may be far from 0, and the plant would otherwise simulate the whole gap).
     t0: Option<f64>,
@@ -42,6 +46,7 @@ pub fn plant_backend(
             plant,
             frame,
             last: last.clone(),
+            joints: [None; 3],
             t0: None,
         },
         PlantSensor { last },
@@ -57,6 +62,13 @@ impl PlantDrive {
     /// Home motor positions of the plant, steps.
     pub fn home_steps(&self) -> [i32; 3] {
         self.plant.home_steps()
+    }
+
+    /// The passive joints M_i (x mm, y mm, robot frame) as the motion capture saw them during
+    /// the last `read`: per joint the latest sample that saw it, `None` where no sample of that
+    /// cycle did (dropout, or no sample due in the cycle).
+    pub fn joints(&self) -> [Option<Vec2>; 3] {
+        self.joints
     }
 }
 
@@ -81,9 +93,16 @@ impl Driver for PlantDrive {
         let t = self.plant_time(time_s);
         let mut s = self.plant.read(t, period_s)?;
         s.time_s = time_s;
+        self.joints = [None; 3];
         for m in self.plant.drain_measurements() {
-            if let Some(p) = m.in_robot_frame(&self.frame).pose {
+            let m = m.in_robot_frame(&self.frame);
+            if let Some(p) = m.pose {
                 self.last.set(Some(Pose::new(p[0], p[1], p[2])));
+            }
+            for (j, seen) in self.joints.iter_mut().zip(m.m) {
+                if seen.is_some() {
+                    *j = seen;
+                }
             }
         }
         Ok(s)

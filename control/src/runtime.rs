@@ -97,19 +97,32 @@ impl SimChain {
         plant_cfg: &PlantConfig,
         period_s: f64,
     ) -> Result<Self, SimChainError> {
-        let robot = Robot::new(robot_cfg).map_err(|e| SimChainError::Robot(e.to_string()))?;
         // The plant deviates from its own drawing, never from the model that drives it.
         let drawing = plant_cfg
             .drawing()
             .map_err(|e| SimChainError::Plant(e.to_string()))?;
-        let (drive, sensor) =
-            plant_backend(&drawing, plant_cfg).map_err(|e| SimChainError::Plant(e.to_string()))?;
+        Self::simulated_on(robot_cfg, &drawing, plant_cfg, period_s)
+    }
+
+    /// The chain driven by the model `model_cfg` (planner, IK, safety limits, and the effects it
+    /// compensates: e.g. a calibrated or extended robot) on a plant whose nominal geometry is
+    /// `plant_robot_cfg` with the deviations of `plant_cfg` on top (the truth, which does not
+    /// change when the model does), at `period_s`, starting at the plant's home motor positions.
+    pub fn simulated_on(
+        model_cfg: &RobotConfig,
+        plant_robot_cfg: &RobotConfig,
+        plant_cfg: &PlantConfig,
+        period_s: f64,
+    ) -> Result<Self, SimChainError> {
+        let robot = Robot::new(model_cfg).map_err(|e| SimChainError::Robot(e.to_string()))?;
+        let (drive, sensor) = plant_backend(plant_robot_cfg, plant_cfg)
+            .map_err(|e| SimChainError::Plant(e.to_string()))?;
         let drive = safety_stack(drive, &robot, 5.0 * period_s);
         let mut interp = InterpolatorStep::new(
             PlannerSource::new(robot.clone(), MotionLimits::default()),
             Pose::default(),
         );
-        let effects = &robot_cfg.effects;
+        let effects = &model_cfg.effects;
         if let Some(l) = &effects.latency {
             interp.set_lead(l.latency_s);
         }
@@ -122,6 +135,13 @@ impl SimChain {
             CorrectionStep::pass_through(),
             period_s,
         ))
+    }
+}
+
+impl SimChain {
+    /// The plant drive inside the safety stack (true state, last capture sample's M_i).
+    pub fn plant_drive(&self) -> &PlantDrive {
+        self.driver.driver().inner().inner().inner()
     }
 }
 

@@ -81,3 +81,43 @@ fn the_capture_correction_removes_most_of_the_prototypes_model_error() {
     let zero = run_corrected(PROTO, program_id::CIRCLE, 0.0);
     assert_eq!(zero.mean_pos_mm(), open.mean_pos_mm());
 }
+
+#[test]
+fn the_plant_drive_reports_the_captured_joints_with_the_pose() {
+    let robot = RobotConfig::load(ROBOT).unwrap();
+    let cfg = PlantConfig::load(IDEAL).unwrap();
+    let mut c = SimChain::simulated(&robot, &cfg, 0.02).unwrap();
+    let model = pcr_kinematics::Robot::new(&robot).unwrap();
+    for _ in 0..5 {
+        c.cycle().unwrap();
+    }
+    // On the ideal plant at home the captured M_i are the model's M_i of the home steps.
+    let joints = c.plant_drive().joints();
+    let home = c.plant_drive().home_steps();
+    for i in 0..3 {
+        let m = joints[i].expect("captured at 100 Hz, no dropouts");
+        let want = model.joint_m(i, model.steps_to_kappa(i, home[i] as f64));
+        assert!(
+            (m[0] - want[0]).hypot(m[1] - want[1]) < 1e-3,
+            "leg {}: {m:?} vs {want:?}",
+            i + 1
+        );
+    }
+}
+
+#[test]
+fn a_changed_model_drives_the_same_plant() {
+    // The truth is built on the plant's own robot; the driving model may differ (a calibrated
+    // robot): the plant starts at the same home either way.
+    let robot = RobotConfig::load(ROBOT).unwrap();
+    let mut model = robot.clone();
+    model.legs[0].l_c_mm += 2.0;
+    let cfg = PlantConfig::load(IDEAL).unwrap();
+    let a = SimChain::simulated(&robot, &cfg, 0.02).unwrap();
+    let b = SimChain::simulated_on(&model, &robot, &cfg, 0.02).unwrap();
+    assert_eq!(a.plant_drive().home_steps(), b.plant_drive().home_steps());
+    assert_eq!(
+        b.ik.robot().config().legs[0].l_c_mm,
+        robot.legs[0].l_c_mm + 2.0
+    );
+}

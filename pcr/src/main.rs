@@ -8,6 +8,7 @@ mod calibrate;
 mod clock;
 mod csvio;
 mod evaluate;
+mod experiment;
 mod figures_kin;
 mod figures_plan;
 mod kin;
@@ -47,6 +48,9 @@ enum Command {
     /// Find what the calibrated model lacks: residuals, candidate effects, held-out attribution,
     /// and the extended robot file.
     Residuals(residuals::Args),
+    /// The paper's experiments (calibration, repeatability, paths, backlash) on the in-process
+    /// chain against the simulated plant, and the calibration pose set.
+    Experiment(experiment::Args),
 }
 
 fn main() -> std::process::ExitCode {
@@ -68,6 +72,7 @@ fn main() -> std::process::ExitCode {
         Command::Calibrate(a) => calibrate::run(a),
         Command::Evaluate(a) => evaluate::run(a),
         Command::Residuals(a) => residuals::run(a),
+        Command::Experiment(a) => experiment::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -607,6 +607,48 @@ impl<W: Write> RecordingWriter<W> {
         Ok(())
     }
 
+    /// Writes one row whose extra cells are text (e.g. a label column) and flushes it. `extra`
+    /// holds the cells of the extra columns (`None`: empty); a cell must not contain a line
+    /// break.
+    pub fn write_row_text(
+        &mut self,
+        row: &Row,
+        extra: &[Option<&str>],
+    ) -> Result<(), RecordingError> {
+        let bad = |message: String| RecordingError::Write {
+            row: self.rows,
+            message,
+        };
+        if extra.len() != self.n_extra {
+            return Err(bad(format!(
+                "{} extra cells for {} extra columns",
+                extra.len(),
+                self.n_extra
+            )));
+        }
+        if !row.t_s.is_finite() {
+            return Err(bad(format!("t_s = {}", row.t_s)));
+        }
+        if let Some(p) = self.prev_t {
+            if row.t_s <= p {
+                return Err(bad(format!("t_s = {} after {p}: must increase", row.t_s)));
+            }
+        }
+        let mut cells = known_cells(row, &self.columns).map_err(bad)?;
+        for (i, v) in extra.iter().enumerate() {
+            let v = v.unwrap_or("");
+            if v.contains(['\n', '\r']) {
+                return Err(bad(format!("extra column {}: line break in {v:?}", i + 1)));
+            }
+            cells.push(v.to_string());
+        }
+        self.out.write_record(&cells).map_err(io_err)?;
+        self.out.flush().map_err(io_err)?;
+        self.prev_t = Some(row.t_s);
+        self.rows += 1;
+        Ok(())
+    }
+
     /// Rows written so far.
     pub fn rows_written(&self) -> usize {
         self.rows

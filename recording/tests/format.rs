@@ -178,3 +178,29 @@ fn set_column_reads_and_writes_train_and_test() {
     let e = err("t_s,q1,q2,q3,set\n0,1,2,3,validation\n");
     assert!(e.contains("`set`") && e.contains("train"), "{e}");
 }
+
+#[test]
+fn text_extra_cells_are_written_and_read_back() {
+    let mut buf = Vec::new();
+    let mut w = RecordingWriter::new(&mut buf, &[], &["settled"], &["segment", "motor"]).unwrap();
+    let mut r = Row::new(0.0, [1, 2, 3]);
+    r.settled = Some(false);
+    w.write_row_text(&r, &[Some("circle"), None]).unwrap();
+    w.write_row_text(&Row::new(0.02, [1, 2, 3]), &[None, Some("2")])
+        .unwrap();
+    assert!(w
+        .write_row_text(&Row::new(0.04, [1, 2, 3]), &[Some("a\nb"), None])
+        .is_err());
+    assert!(w
+        .write_row_text(&Row::new(0.06, [1, 2, 3]), &[None])
+        .is_err());
+    assert!(w
+        .write_row_text(&Row::new(0.02, [1, 2, 3]), &[None, None])
+        .is_err());
+    drop(w);
+    let rec = Recording::read(&buf[..], "t.csv").unwrap();
+    assert_eq!(rec.extra_columns, ["segment", "motor"]);
+    assert_eq!(rec.rows[0].extra, [Some("circle".to_string()), None]);
+    assert_eq!(rec.rows[1].extra, [None, Some("2".to_string())]);
+    assert_eq!(rec.rows.len(), 2);
+}
