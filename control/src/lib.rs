@@ -14,6 +14,7 @@
 //! * [`Recorder`] (the recording format) and [`Accuracy`] (planned vs measured).
 
 pub mod accuracy;
+pub mod capture_feed;
 pub mod correction;
 pub mod drive;
 pub mod driver_step;
@@ -26,6 +27,7 @@ pub mod runtime;
 pub mod setpoint;
 
 pub use accuracy::Accuracy;
+pub use capture_feed::{sim_parameters, CaptureFeed};
 pub use correction::{measured_of, CorrectionConfig, CorrectionConfigError, CorrectionStep};
 pub use drive::{
     max_step_rate, safety_stack, FkPoseSensor, IdealDrive, NoPoseSensor, PoseSensor, SafeDriver,

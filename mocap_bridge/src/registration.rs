@@ -215,12 +215,14 @@ impl Registration {
             .iter()
             .max_by(|a, b| a.residual_mm.total_cmp(&b.residual_mm));
         match worst {
-            Some(w) if w.residual_mm.is_nan() || w.residual_mm > max_mm => Err(RegistrationError::Residual {
-                label: w.label.clone(),
-                residual_mm: w.residual_mm,
-                max_mm,
-                all: self.residuals_text(),
-            }),
+            Some(w) if w.residual_mm.is_nan() || w.residual_mm > max_mm => {
+                Err(RegistrationError::Residual {
+                    label: w.label.clone(),
+                    residual_mm: w.residual_mm,
+                    max_mm,
+                    all: self.residuals_text(),
+                })
+            }
             _ => Ok(()),
         }
     }

@@ -11,6 +11,7 @@ mod kin;
 mod plan;
 mod plant;
 mod profile;
+mod qtm;
 
 /// Offline tools for the 3-FbRR planar parallel continuum robot.
 #[derive(Parser)]
@@ -34,6 +35,8 @@ enum Command {
     Plan(plan::Args),
     /// Static poses and time-stepped runs of the simulated plant.
     Plant(plant::Args),
+    /// Qualisys QTM RT tools: server parameters, streaming to CSV, registration, simulator.
+    Qtm(qtm::Args),
 }
 
 fn main() -> std::process::ExitCode {
@@ -52,6 +55,7 @@ fn main() -> std::process::ExitCode {
         Command::Profile(a) => profile::run(a),
         Command::Plan(a) => plan::run(a),
         Command::Plant(a) => plant::run(a),
+        Command::Qtm(a) => qtm::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
