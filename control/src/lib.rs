@@ -40,7 +40,7 @@ pub use interpolator::{
 };
 pub use planned::{MotionLimits, PlannerSource};
 pub use plant_drive::{plant_backend, PlantDrive, PlantSensor};
-pub use recorder::Recorder;
+pub use recorder::{Measured, Recorder};
 pub use runtime::{CycleOutput, InProcessChain, InterimChain, RunError, SimChain, SimChainError};
 pub use setpoint::{
     moves_of_program, paper_circle, paper_program, paper_square, Braking, InterimPathSource, Move,

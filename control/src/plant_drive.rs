@@ -17,6 +17,7 @@ use pcr_plant::{Frame, Plant, PlantConfig, PlantError};
 use pcr_robot::RobotConfig;
 use std::cell::Cell;
 use std::rc::Rc;
+use std::sync::Arc;
 
 /// The plant behind the driver interface.
 pub struct PlantDrive {
@@ -27,7 +28,7 @@ pub struct PlantDrive {
     /// may be far from 0, and the plant would otherwise simulate the whole gap).
     t0: Option<f64>,
     /// The simulated QTM fed with every capture sample.
-    qtm: Option<(QtmServer, CaptureFeed)>,
+    qtm: Option<(Arc<QtmServer>, CaptureFeed)>,
 }
 
 /// The plant's motion-capture view, as the driver step's pose sensor.
@@ -63,13 +64,13 @@ impl PlantDrive {
 
     /// Streams every capture sample from now on through `server` (a simulated QTM whose
     /// parameters are [`crate::capture_feed::sim_parameters`]).
-    pub fn serve_qtm(&mut self, server: QtmServer) {
+    pub fn serve_qtm(&mut self, server: Arc<QtmServer>) {
         let feed = CaptureFeed::new(&self.plant);
         self.qtm = Some((server, feed));
     }
 
     /// The simulated QTM, if serving.
-    pub fn qtm_server(&self) -> Option<&QtmServer> {
+    pub fn qtm_server(&self) -> Option<&Arc<QtmServer>> {
         self.qtm.as_ref().map(|q| &q.0)
     }
 
