@@ -89,6 +89,42 @@ proptest! {
     }
 
     #[test]
+    fn plausible_packets_with_lying_sizes_and_counts_never_panic(packets in proptest::collection::vec(
+        (0u32..10, -3i32..4, 0u32..6, proptest::collection::vec(
+            (prop_oneof![Just(1u32), Just(6), Just(9), Just(12), 0u32..20], 0u32..8, -20i32..20,
+             proptest::collection::vec(any::<u8>(), 0..64)), 0..4)), 1..8)) {
+        // headers that are nearly right: real types, sizes off by a few bytes, data packets
+        // of components with real or unknown types, counts and sizes that may lie
+        let mut stream = Vec::new();
+        for (ty, size_err, n_comp, comps) in &packets {
+            let mut body = Vec::new();
+            if *ty == 3 {
+                body.extend_from_slice(&7u64.to_le_bytes());
+                body.extend_from_slice(&1u32.to_le_bytes());
+                body.extend_from_slice(&n_comp.to_le_bytes());
+                for (cty, count, cerr, data) in comps {
+                    let size = (16 + data.len()) as i64 + i64::from(*cerr);
+                    body.extend_from_slice(&(size.max(0) as u32).to_le_bytes());
+                    body.extend_from_slice(&cty.to_le_bytes());
+                    body.extend_from_slice(&count.to_le_bytes());
+                    body.extend_from_slice(&[0, 0, 0, 0]);
+                    body.extend_from_slice(data);
+                }
+            } else if let Some((_, _, _, data)) = comps.first() {
+                body.extend_from_slice(data);
+            }
+            let size = (8 + body.len()) as i64 + i64::from(*size_err);
+            stream.extend_from_slice(&(size.max(0) as u32).to_le_bytes());
+            stream.extend_from_slice(&ty.to_le_bytes());
+            stream.extend_from_slice(&body);
+        }
+        let mut p = PacketParser::new(MAX);
+        let mut f = Frame::default();
+        p.push(&stream);
+        drain(&mut p, &mut f);
+    }
+
+    #[test]
     fn random_payloads_never_panic_the_frame_decoder(
         payload in proptest::collection::vec(any::<u8>(), 0..400)) {
         let mut f = Frame::default();
