@@ -347,7 +347,7 @@ fn a_version_mismatched_process_is_refused() {
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(3), "{stderr}");
     assert!(stderr.contains("protocol version mismatch"), "{stderr}");
-    assert!(stderr.contains("v99") && stderr.contains("v2"), "{stderr}");
+    assert!(stderr.contains("v99") && stderr.contains("v3"), "{stderr}");
     // The chain is unaffected.
     assert!(chain.ctl("status").starts_with("state: ready"));
     // SIGINT (Ctrl-C) shuts the chain down cleanly.
