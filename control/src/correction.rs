@@ -9,7 +9,7 @@
 //! error between model and robot (geometry, tendon map, creep); what it cannot remove is what
 //! changes faster than a few cycles (backlash reversals, friction jumps, capture noise).
 
-use pcr_messages::{Correction, DriverStateMsg, MeasuredPose, PROTOCOL_VERSION};
+use pcr_messages::{correction_flags, Correction, DriverStateMsg, MeasuredPose, PROTOCOL_VERSION};
 
 /// Planned poses remembered for matching a delayed measurement (64 cycles = 1.28 s at 20 ms).
 const HISTORY: usize = 64;
@@ -130,12 +130,17 @@ impl CorrectionStep {
         None
     }
 
-    /// One cycle: the measurement reported in this cycle and the planned (nominal) pose of the
-    /// setpoint executed in this cycle at chain time `t_s`. Allocation-free.
-    pub fn step(&mut self, m: &MeasuredPose, t_s: f64, planned: &[f64; 3]) -> Correction {
+    /// Remembers the planned (nominal) pose of the setpoint executed at chain time `t_s`.
+    pub fn observe(&mut self, t_s: f64, planned: &[f64; 3]) {
         self.history[self.head] = (t_s, *planned);
         self.head = (self.head + 1) % HISTORY;
         self.len = (self.len + 1).min(HISTORY);
+    }
+
+    /// Integrates one measurement against the pose planned at its own time (less the
+    /// latency). An invalid measurement (not seen in this frame) changes nothing.
+    /// Allocation-free.
+    pub fn measure(&mut self, m: &MeasuredPose) -> Correction {
         let mut error = [0.0; 3];
         let reference = self.planned_at(m.t_s - self.cfg.latency_s);
         if let (true, Some(reference)) = (m.valid != 0, reference) {
@@ -155,8 +160,28 @@ impl CorrectionStep {
             error,
             seq: m.seq,
             version: PROTOCOL_VERSION,
-            reserved: 0,
+            flags: 0,
         }
+    }
+
+    /// No fresh measurement: the offset is held (not integrated) and the correction says so
+    /// ([`correction_flags::HELD`]).
+    pub fn hold(&self, t_s: f64, seq: u64) -> Correction {
+        Correction {
+            t_s,
+            offset: self.offset,
+            error: [0.0; 3],
+            seq,
+            version: PROTOCOL_VERSION,
+            flags: correction_flags::HELD,
+        }
+    }
+
+    /// One cycle: the measurement reported in this cycle and the planned (nominal) pose of the
+    /// setpoint executed in this cycle at chain time `t_s`. Allocation-free.
+    pub fn step(&mut self, m: &MeasuredPose, t_s: f64, planned: &[f64; 3]) -> Correction {
+        self.observe(t_s, planned);
+        self.measure(m)
     }
 
     /// One cycle from a driver state (its measured pose and the planned pose it executed).
@@ -245,6 +270,23 @@ mod tests {
         });
         let o = c.step(&meas(0.0, [9.0, 0.0, 0.0]), 0.0, &[0.0; 3]).offset;
         assert_eq!(o[0], -2.0);
+    }
+
+    #[test]
+    fn a_held_correction_keeps_the_offset_and_says_so() {
+        let mut c = CorrectionStep::new(CorrectionConfig {
+            gain: 0.5,
+            ..Default::default()
+        });
+        let o = c.step(&meas(0.0, [2.0, 0.0, 0.0]), 0.0, &[0.0; 3]).offset;
+        let h = c.hold(0.02, 7);
+        assert_eq!((h.offset, h.flags), (o, correction_flags::HELD));
+        assert_eq!(c.offset(), o);
+        // measurements resume: integration goes on from the held offset
+        c.observe(0.04, &[0.0; 3]);
+        let r = c.measure(&meas(0.04, [1.0 + o[0], 0.0, 0.0]));
+        assert_eq!(r.flags, 0);
+        assert!((r.offset[0] - (o[0] - 0.5 * (1.0 + o[0]))).abs() < 1e-12);
     }
 
     #[test]

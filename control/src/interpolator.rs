@@ -387,6 +387,8 @@ pub struct InterpolatorStep<S> {
     last_t_s: Option<f64>,
     hold: Pose,
     offset: [f64; 3],
+    /// The last correction was held (no fresh measurement).
+    correction_held: bool,
     seq: u64,
     done_sent: bool,
     /// (seq, program time) of the last [`HISTORY`] setpoints, for [`Self::rewind_to_seq`].
@@ -427,6 +429,7 @@ impl<S: SetpointSource> InterpolatorStep<S> {
             last_t_s: None,
             hold: home,
             offset: [0.0; 3],
+            correction_held: false,
             seq: 0,
             done_sent: false,
             history: [(0, 0.0); HISTORY],
@@ -654,11 +657,14 @@ impl<S: SetpointSource> InterpolatorStep<S> {
         }
     }
 
-    /// Applies a task-space correction offset (x mm, y mm, phi rad) to later setpoints.
+    /// Applies a task-space correction offset (x mm, y mm, phi rad) to later setpoints; a
+    /// held correction ([`pcr_messages::correction_flags::HELD`]) flags them
+    /// [`task_flags::UNCORRECTED`] until a fresh one arrives.
     pub fn set_correction(&mut self, c: &Correction) {
         if c.offset.iter().all(|v| v.is_finite()) {
             self.offset = c.offset;
         }
+        self.correction_held = c.flags & pcr_messages::correction_flags::HELD != 0;
     }
 
     /// Sets the pose held while idle from a pose the robot was commanded to (e.g. FK of the
@@ -722,6 +728,9 @@ impl<S: SetpointSource> InterpolatorStep<S> {
                 }
             }
             _ => {}
+        }
+        if self.correction_held {
+            flags |= task_flags::UNCORRECTED;
         }
         self.seq += 1;
         self.history[(self.seq % HISTORY as u64) as usize] = (self.seq, self.tau_s);

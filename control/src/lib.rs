@@ -14,6 +14,7 @@
 //! * [`Recorder`] (the recording format) and [`Accuracy`] (planned vs measured).
 
 pub mod accuracy;
+pub mod capture_feed;
 pub mod compensation;
 pub mod correction;
 pub mod drive;
@@ -27,6 +28,7 @@ pub mod runtime;
 pub mod setpoint;
 
 pub use accuracy::Accuracy;
+pub use capture_feed::{sim_parameters, CaptureFeed};
 pub use compensation::MotorCompensation;
 pub use correction::{measured_of, CorrectionConfig, CorrectionConfigError, CorrectionStep};
 pub use drive::{
@@ -40,7 +42,7 @@ pub use interpolator::{
 };
 pub use planned::{MotionLimits, PlannerSource};
 pub use plant_drive::{plant_backend, PlantDrive, PlantSensor};
-pub use recorder::Recorder;
+pub use recorder::{Measured, Recorder};
 pub use runtime::{CycleOutput, InProcessChain, InterimChain, RunError, SimChain, SimChainError};
 pub use setpoint::{
     moves_of_program, paper_circle, paper_program, paper_square, Braking, InterimPathSource, Move,

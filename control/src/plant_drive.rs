@@ -5,16 +5,22 @@
 //! [`PlantSensor`] hands that sample to the driver step as the measured pose. The capture sample
 //! is mapped into the robot frame with the plant's capture transform (what a registration would
 //! find; the correction step may refine it). The passive joints M_i of the same samples are kept
-//! too ([`PlantDrive::joints`]) for the experiment runners, which record them.
+//! too ([`PlantDrive::joints`]) for the experiment runners, which record them. With
+//! [`PlantDrive::serve_qtm`] the same samples are also streamed by a simulated QTM
+//! ([`crate::capture_feed`]), so that the chain can take its measurements through the real QTM
+//! RT protocol.
 
+use crate::capture_feed::CaptureFeed;
 use crate::drive::PoseSensor;
 use pcr_driver::{Driver, DriverError, DriverState, MotorCommand};
 use pcr_kinematics::Pose;
+use pcr_mocap_bridge::QtmServer;
 use pcr_plant::{Frame, Plant, PlantConfig, PlantError};
 use pcr_robot::RobotConfig;
 use pcr_robot::Vec2;
 use std::cell::Cell;
 use std::rc::Rc;
+use std::sync::Arc;
 
 /// The plant behind the driver interface.
 pub struct PlantDrive {
@@ -26,6 +32,8 @@ pub struct PlantDrive {
     /// The caller's time at the first call: the plant's clock starts there (a process's clock
     /// may be far from 0, and the plant would otherwise simulate the whole gap).
     t0: Option<f64>,
+    /// The simulated QTM fed with every capture sample.
+    qtm: Option<(Arc<QtmServer>, CaptureFeed)>,
 }
 
 /// The plant's motion-capture view, as the driver step's pose sensor.
@@ -48,6 +56,7 @@ pub fn plant_backend(
             last: last.clone(),
             joints: [None; 3],
             t0: None,
+            qtm: None,
         },
         PlantSensor { last },
     ))
@@ -57,6 +66,18 @@ impl PlantDrive {
     /// The plant (true state, configuration).
     pub fn plant(&self) -> &Plant {
         &self.plant
+    }
+
+    /// Streams every capture sample from now on through `server` (a simulated QTM whose
+    /// parameters are [`crate::capture_feed::sim_parameters`]).
+    pub fn serve_qtm(&mut self, server: Arc<QtmServer>) {
+        let feed = CaptureFeed::new(&self.plant);
+        self.qtm = Some((server, feed));
+    }
+
+    /// The simulated QTM, if serving.
+    pub fn qtm_server(&self) -> Option<&Arc<QtmServer>> {
+        self.qtm.as_ref().map(|q| &q.0)
     }
 
     /// Home motor positions of the plant, steps.
@@ -95,6 +116,9 @@ impl Driver for PlantDrive {
         s.time_s = time_s;
         self.joints = [None; 3];
         for m in self.plant.drain_measurements() {
+            if let Some((server, feed)) = &mut self.qtm {
+                server.push(feed.frame_of(&m));
+            }
             let m = m.in_robot_frame(&self.frame);
             if let Some(p) = m.pose {
                 self.last.set(Some(Pose::new(p[0], p[1], p[2])));

@@ -18,7 +18,7 @@
 use iceoryx2::prelude::ZeroCopySend;
 
 /// Version of the chain's protocol (message layouts and service names). Bump on any change.
-pub const PROTOCOL_VERSION: u32 = 2;
+pub const PROTOCOL_VERSION: u32 = 3;
 
 /// The unversioned service on which every process announces its protocol version.
 pub const PROTOCOL_SERVICE: &str = "pcr/protocol";
@@ -37,6 +37,9 @@ pub mod services {
     pub const CORRECTION: &str = "correction";
     /// Every process -> supervisor: [`crate::Heartbeat`].
     pub const HEARTBEAT: &str = "heartbeat";
+    /// Motion-capture bridge (`pcr-qtm`) -> correction, recorder: [`crate::MocapSample`]
+    /// (publish-subscribe + event of the same name).
+    pub const MOCAP: &str = "mocap";
     /// Supervisor -> interpolator: [`crate::Command`].
     pub const COMMAND: &str = "command";
     /// Interpolator -> supervisor: [`crate::PlannerStatus`].
@@ -98,6 +101,8 @@ pub enum NodeKind {
     Supervisor = 5,
     /// A test or benchmark client.
     Tool = 6,
+    /// The motion-capture bridge (`pcr-qtm`).
+    Qtm = 7,
 }
 
 impl NodeKind {
@@ -110,10 +115,11 @@ impl NodeKind {
             4 => NodeKind::Mocap,
             5 => NodeKind::Supervisor,
             6 => NodeKind::Tool,
+            7 => NodeKind::Qtm,
             _ => return None,
         })
     }
-    /// Short name (`planner`, `ik`, `driver`, `mocap`, `supervisor`, `tool`).
+    /// Short name (`planner`, `ik`, `driver`, `mocap`, `supervisor`, `tool`, `qtm`).
     pub fn name(self) -> &'static str {
         match self {
             NodeKind::Planner => "planner",
@@ -122,6 +128,7 @@ impl NodeKind {
             NodeKind::Mocap => "mocap",
             NodeKind::Supervisor => "supervisor",
             NodeKind::Tool => "tool",
+            NodeKind::Qtm => "qtm",
         }
     }
 }
@@ -166,6 +173,9 @@ pub mod task_flags {
     pub const PAUSED: u32 = 2;
     /// This is the last setpoint of the program.
     pub const DONE: u32 = 4;
+    /// The motion-capture correction is held (no fresh measurement): the setpoint carries the
+    /// last offset, not a corrected one.
+    pub const UNCORRECTED: u32 = 8;
 }
 
 /// Interpolator output: the task-space setpoint of one cycle.
@@ -292,10 +302,17 @@ pub struct MeasuredPose {
     pub version: u32,
 }
 
+/// Bits of [`Correction::flags`].
+pub mod correction_flags {
+    /// No fresh measurement (the capture data stopped or went stale): the offset is held and
+    /// not integrated; setpoints are flagged [`crate::task_flags::UNCORRECTED`].
+    pub const HELD: u32 = 1;
+}
+
 /// Task-space correction added to the interpolator's setpoint (outer loop).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("pcr::v1::Correction")]
+#[type_name("pcr::v3::Correction")]
 pub struct Correction {
     /// Chain time, s.
     pub t_s: f64,
@@ -307,8 +324,67 @@ pub struct Correction {
     pub seq: u64,
     /// [`PROTOCOL_VERSION`].
     pub version: u32,
-    /// Reserved.
+    /// [`correction_flags`].
+    pub flags: u32,
+}
+
+/// Bits of [`MocapSample::valid`]: which fields were measured in this frame.
+pub mod mocap_valid {
+    /// The platform pose.
+    pub const POSE: u32 = 1;
+    /// Base marker B_i: `BASE << i`.
+    pub const BASE: u32 = 2;
+    /// Joint marker M_i: `JOINT << i`.
+    pub const JOINT: u32 = 16;
+    /// The bridge is connected and streaming (0 in a sample announcing a lost link).
+    pub const LINK: u32 = 128;
+}
+
+/// One motion-capture frame in the robot base frame, published by the bridge (`pcr-qtm`) at
+/// the capture rate.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("pcr::v3::MocapSample")]
+pub struct MocapSample {
+    /// Chain time of the capture (QTM's timestamp mapped onto CLOCK_MONOTONIC), s.
+    pub t_s: f64,
+    /// CLOCK_MONOTONIC ns of the socket read that delivered the frame.
+    pub rx_ns: u64,
+    /// CLOCK_MONOTONIC ns of the publication.
+    pub pub_ns: u64,
+    /// QTM's timestamp, microseconds since its capture started.
+    pub qtm_timestamp_us: u64,
+    /// Sample counter of the bridge (strictly increasing).
+    pub seq: u64,
+    /// QTM's frame number.
+    pub frame_number: u32,
+    /// [`mocap_valid`] bits.
+    pub valid: u32,
+    /// Platform pose: x mm, y mm, phi rad.
+    pub pose: [f64; 3],
+    /// Base markers B_1..B_3: x, y, z mm.
+    pub base: [[f64; 3]; 3],
+    /// Joint markers M_1..M_3: x, y, z mm.
+    pub joints: [[f64; 3]; 3],
+    /// [`PROTOCOL_VERSION`].
+    pub version: u32,
+    /// Reserved, 0.
     pub reserved: u32,
+}
+
+impl MocapSample {
+    /// The platform pose, if measured.
+    pub fn pose(&self) -> Option<[f64; 3]> {
+        (self.valid & mocap_valid::POSE != 0).then_some(self.pose)
+    }
+    /// Joint marker M_i (0-based), if measured.
+    pub fn joint(&self, i: usize) -> Option<[f64; 3]> {
+        (i < 3 && self.valid & (mocap_valid::JOINT << i) != 0).then(|| self.joints[i])
+    }
+    /// Base marker B_i (0-based), if measured.
+    pub fn base_point(&self, i: usize) -> Option<[f64; 3]> {
+        (i < 3 && self.valid & (mocap_valid::BASE << i) != 0).then(|| self.base[i])
+    }
 }
 
 /// Cycle statistics and liveness of one process, published every heartbeat period.

@@ -15,6 +15,7 @@ mod kin;
 mod plan;
 mod plant;
 mod profile;
+mod qtm;
 mod residuals;
 
 /// Offline tools for the 3-FbRR planar parallel continuum robot.
@@ -51,6 +52,8 @@ enum Command {
     /// The paper's experiments (calibration, repeatability, paths, backlash) on the in-process
     /// chain against the simulated plant, and the calibration pose set.
     Experiment(experiment::Args),
+    /// Qualisys QTM RT tools: server parameters, streaming to CSV, registration, simulator.
+    Qtm(qtm::Args),
 }
 
 fn main() -> std::process::ExitCode {
@@ -73,6 +76,7 @@ fn main() -> std::process::ExitCode {
         Command::Evaluate(a) => evaluate::run(a),
         Command::Residuals(a) => residuals::run(a),
         Command::Experiment(a) => experiment::run(a),
+        Command::Qtm(a) => qtm::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

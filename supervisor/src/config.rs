@@ -48,6 +48,8 @@ pub enum ProcessName {
     Driver,
     /// `pcr-mocap`.
     Mocap,
+    /// `pcr-qtm` (the motion-capture bridge; needs a `[capture]` section).
+    Qtm,
 }
 
 impl ProcessName {
@@ -58,6 +60,7 @@ impl ProcessName {
             ProcessName::Ik => "ik",
             ProcessName::Driver => "driver",
             ProcessName::Mocap => "mocap",
+            ProcessName::Qtm => "qtm",
         }
     }
     /// The binary's file name.
@@ -72,6 +75,7 @@ impl ProcessName {
             ProcessName::Ik => K::Ik,
             ProcessName::Driver => K::Driver,
             ProcessName::Mocap => K::Mocap,
+            ProcessName::Qtm => K::Qtm,
         }
     }
 }
@@ -171,11 +175,63 @@ pub struct RealtimeConfig {
     pub cpu_dma_latency_us: Option<i32>,
 }
 
+/// Capture systems.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum CaptureSystem {
+    /// Qualisys QTM over its real-time protocol (`pcr-qtm`).
+    Qtm,
+}
+
+/// The motion-capture system (`[capture]`): where the measured pose and the recording's
+/// measured columns come from. Without it, `pcr-mocap` takes the driver backend's pose sensor.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CaptureConfig {
+    /// The system (`qtm`).
+    pub system: CaptureSystem,
+    /// QTM host.
+    #[serde(default = "CaptureConfig::d_host")]
+    pub host: String,
+    /// QTM RT port (little-endian; 0 with `simulate`: any free port).
+    #[serde(default = "CaptureConfig::d_port")]
+    pub port: u16,
+    /// The driver's plant backend serves a simulated QTM on `host:port` (simulation).
+    #[serde(default)]
+    pub simulate: bool,
+    /// Registration file (`pcr qtm register`), or `auto` (register from the base markers at
+    /// every connection).
+    #[serde(default = "CaptureConfig::d_reg")]
+    pub registration: String,
+    /// The platform's 6DOF body (default: the first).
+    pub body: Option<String>,
+    /// A measurement older than this holds the correction, ms.
+    #[serde(default = "CaptureConfig::d_stale")]
+    pub stale_ms: f64,
+    /// Ask QTM for about this many frames per second (default: all frames).
+    pub frequency: Option<u32>,
+}
+
+impl CaptureConfig {
+    fn d_host() -> String {
+        "127.0.0.1".into()
+    }
+    fn d_port() -> u16 {
+        22223
+    }
+    fn d_reg() -> String {
+        "auto".into()
+    }
+    fn d_stale() -> f64 {
+        100.0
+    }
+}
+
 /// One process to run.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ProcessConfig {
-    /// Which process (`planner`, `ik`, `driver`, `mocap`).
+    /// Which process (`planner`, `ik`, `driver`, `mocap`, `qtm`).
     pub name: ProcessName,
     /// Driver backend (`sim`, `serial`); driver only.
     pub backend: Option<Backend>,
@@ -228,6 +284,9 @@ pub struct SupervisorConfig {
     /// Real-time settings.
     #[serde(default)]
     pub realtime: RealtimeConfig,
+    /// The motion-capture system, if any.
+    #[serde(default)]
+    pub capture: Option<CaptureConfig>,
     /// The processes.
     #[serde(default)]
     pub process: Vec<ProcessConfig>,
@@ -364,6 +423,47 @@ impl SupervisorConfig {
                 return Err(bad(key("port"), "only the driver has a port".into()));
             }
         }
+        let has_qtm = seen.contains(&ProcessName::Qtm);
+        match &self.capture {
+            Some(c) => {
+                if !has_qtm {
+                    return Err(bad(
+                        "capture".into(),
+                        "a capture system needs a [[process]] named qtm (the bridge)".into(),
+                    ));
+                }
+                if !(c.stale_ms.is_finite() && c.stale_ms > 0.0) {
+                    return Err(bad(
+                        "capture.stale_ms".into(),
+                        format!("must be a positive number, got {}", c.stale_ms),
+                    ));
+                }
+                let plant = self
+                    .process
+                    .iter()
+                    .any(|p| p.name == ProcessName::Driver && p.backend == Some(Backend::Plant));
+                if c.simulate && !plant {
+                    return Err(bad(
+                        "capture.simulate".into(),
+                        "only the driver's plant backend can simulate a QTM".into(),
+                    ));
+                }
+                if c.port == 0 && !c.simulate {
+                    return Err(bad(
+                        "capture.port".into(),
+                        "port 0 (any free port) only with simulate = true".into(),
+                    ));
+                }
+            }
+            None if has_qtm => {
+                return Err(bad(
+                    "process".into(),
+                    "the qtm process needs a [capture] section (system = \"qtm\", host, port)"
+                        .into(),
+                ))
+            }
+            None => {}
+        }
         for needed in [ProcessName::Planner, ProcessName::Ik, ProcessName::Driver] {
             if !seen.contains(&needed) {
                 return Err(bad(
@@ -433,6 +533,16 @@ backend = "sim"
         assert!(e.contains("planner"), "{e}");
         let e = err("period_ms = ");
         assert!(e.contains("not valid TOML"), "{e}");
+        let e = err(&format!("{OK}\n[[process]]\nname = \"qtm\"\n"));
+        assert!(e.contains("[capture]"), "{e}");
+        let e = err(&format!("{OK}\n[capture]\nsystem = \"qtm\"\n"));
+        assert!(e.contains("`capture`") && e.contains("qtm"), "{e}");
+        let e = err(&format!(
+            "{OK}\n[[process]]\nname = \"qtm\"\n[capture]\nsystem = \"qtm\"\nsimulate = true\n"
+        ));
+        assert!(e.contains("capture.simulate"), "{e}");
+        let e = err(&format!("{OK}\n[capture]\nsystem = \"vicon\"\n"));
+        assert!(e.contains("capture.system"), "{e}");
     }
 
     #[test]

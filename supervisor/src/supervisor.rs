@@ -7,10 +7,10 @@ use anyhow::{anyhow, Context, Result};
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
-use pcr_control::{command_of_moves, simple_command, Accuracy, Recorder};
+use pcr_control::{command_of_moves, simple_command, Accuracy, Measured, Recorder};
 use pcr_messages::{
-    command_kind, planner_state, program_id, services as s, Command, DriverStateMsg, Heartbeat,
-    NodeKind, PlannerStatus, PROTOCOL_VERSION,
+    command_kind, driver_flags, planner_state, program_id, services as s, task_flags, Command,
+    DriverStateMsg, Heartbeat, MocapSample, NodeKind, PlannerStatus, PROTOCOL_VERSION,
 };
 use pcr_nodes::{ChainNode, ProtocolGuard};
 use std::collections::VecDeque;
@@ -124,7 +124,14 @@ struct Run {
     /// A recovery after a planner restart: `Some(false)` waits for the planner, `Some(true)`
     /// has sent RECOVER and waits for the run to be back (paused).
     recover: Option<bool>,
+    /// Rows whose setpoint was flagged uncorrected (capture data lost or stale).
+    uncorrected: u64,
+    /// Rows without a measured pose.
+    unmeasured: u64,
 }
+
+/// Samples of the motion-capture bridge kept for matching driver-state rows.
+const MOCAP_RING: usize = 32;
 
 /// The supervisor.
 pub struct Supervisor {
@@ -138,6 +145,14 @@ pub struct Supervisor {
     sub_hb: Subscriber<ipc::Service, Heartbeat, ()>,
     sub_state: Subscriber<ipc::Service, DriverStateMsg, ()>,
     sub_status: Subscriber<ipc::Service, PlannerStatus, ()>,
+    /// The bridge's samples (configurations with a capture system).
+    sub_mocap: Option<Subscriber<ipc::Service, MocapSample, ()>>,
+    /// The newest bridge samples, oldest first.
+    mocap: VecDeque<MocapSample>,
+    /// When the newest bridge sample arrived.
+    mocap_at: Option<Instant>,
+    /// The capture system's port (resolved when the configuration says 0).
+    qtm_port: u16,
     socket: UnixListener,
     socket_path: PathBuf,
     run: Option<Run>,
@@ -185,6 +200,30 @@ impl Supervisor {
         let sub_hb = node.subscriber::<Heartbeat>(s::HEARTBEAT)?;
         let sub_state = node.subscriber::<DriverStateMsg>(s::DRIVER_STATE)?;
         let sub_status = node.subscriber::<PlannerStatus>(s::STATUS)?;
+        let sub_mocap = match &cfg.capture {
+            Some(_) => Some(node.subscriber::<MocapSample>(s::MOCAP)?),
+            None => None,
+        };
+        let qtm_port = match &cfg.capture {
+            Some(c) if c.simulate && c.port == 0 => {
+                let l = std::net::TcpListener::bind((c.host.as_str(), 0))
+                    .with_context(|| format!("key `capture.host`: cannot listen on {}", c.host))?;
+                l.local_addr()?.port()
+            }
+            Some(c) => c.port,
+            None => 0,
+        };
+        if let Some(c) = &cfg.capture {
+            eprintln!(
+                "pcr-supervisor: capture system QTM at {}:{qtm_port}{}",
+                c.host,
+                if c.simulate {
+                    " (simulated by the driver's plant)"
+                } else {
+                    ""
+                }
+            );
+        }
         let socket_path = cfg.socket_path();
         if socket_path.exists() {
             if UnixStream::connect(&socket_path).is_ok() {
@@ -232,6 +271,10 @@ impl Supervisor {
             sub_hb,
             sub_state,
             sub_status,
+            sub_mocap,
+            mocap: VecDeque::with_capacity(MOCAP_RING),
+            mocap_at: None,
+            qtm_port,
             socket,
             socket_path,
             run: None,
@@ -266,6 +309,45 @@ impl Supervisor {
         }
         if cfg.realtime.mlockall {
             cmd.arg("--mlockall");
+        }
+        if let Some(cap) = &cfg.capture {
+            match p.cfg.name {
+                ProcessName::Driver if cap.simulate => {
+                    cmd.arg("--qtm-port")
+                        .arg(self.qtm_port.to_string())
+                        .arg("--qtm-bind")
+                        .arg(&cap.host);
+                }
+                ProcessName::Qtm => {
+                    let reg = if cap.registration == "auto" {
+                        cap.registration.clone()
+                    } else {
+                        std::fs::canonicalize(&cap.registration)
+                            .map_or(cap.registration.clone(), |p| p.display().to_string())
+                    };
+                    cmd.arg("--host")
+                        .arg(&cap.host)
+                        .arg("--port")
+                        .arg(self.qtm_port.to_string())
+                        .arg("--registration")
+                        .arg(reg)
+                        .arg("--stale-ms")
+                        .arg(cap.stale_ms.to_string());
+                    if let Some(b) = &cap.body {
+                        cmd.arg("--body").arg(b);
+                    }
+                    if let Some(f) = cap.frequency {
+                        cmd.arg("--frequency").arg(f.to_string());
+                    }
+                }
+                ProcessName::Mocap => {
+                    cmd.arg("--source")
+                        .arg("qtm")
+                        .arg("--stale-ms")
+                        .arg(cap.stale_ms.to_string());
+                }
+                _ => {}
+            }
         }
         match p.cfg.backend {
             Some(Backend::Sim) => {
@@ -334,6 +416,8 @@ impl Supervisor {
         }
         let name = p.name();
         let is_planner = p.cfg.name == ProcessName::Planner;
+        // Without the bridge the correction holds its offset: the robot goes on.
+        let is_bridge = p.cfg.name == ProcessName::Qtm;
         if p.failures.len() as u32 > max_failures {
             p.gave_up = true;
             let msg = format!(
@@ -370,6 +454,11 @@ impl Supervisor {
                     eprintln!(
                         "pcr-supervisor: run {} paused: the planner restarts; the robot holds and \
                          the run continues from where it stopped",
+                        run.id
+                    );
+                } else if is_bridge {
+                    eprintln!(
+                        "pcr-supervisor: run {} continues while qtm restarts (correction held)",
                         run.id
                     );
                 } else if !run.paused_by_supervisor {
@@ -441,6 +530,11 @@ impl Supervisor {
                 Backend::Fil => "pcr-supervisor, firmware in the loop (simavr) and simulated plant",
                 Backend::Serial => "pcr-supervisor, serial driver",
             });
+        let backend = match &self.cfg.capture {
+            Some(_) => format!("{backend}; measured by QTM through pcr-qtm"),
+            None => backend.to_string(),
+        };
+        let backend = backend.as_str();
         let created = stamp.to_string();
         let robot = self.robot_path.display().to_string();
         let recorder = Recorder::new(
@@ -477,6 +571,8 @@ impl Supervisor {
             origin: None,
             executed: None,
             recover: None,
+            uncorrected: 0,
+            unmeasured: 0,
         });
         Ok(format!(
             "run {id} ({name}) started; recording {}",
@@ -586,6 +682,33 @@ impl Supervisor {
         }
         if let Some(l) = &self.last_summary {
             out.push_str(&format!("last run: {l}\n"));
+        }
+        if let Some(cap) = &self.cfg.capture {
+            let age = self.mocap_at.map(|t| t.elapsed());
+            let fresh = age.is_some_and(|a| a.as_secs_f64() * 1e3 <= cap.stale_ms);
+            out.push_str(&format!(
+                "capture: qtm {}:{}{}; {}; correction {}{}\n",
+                cap.host,
+                self.qtm_port,
+                if cap.simulate { " (simulated)" } else { "" },
+                match age {
+                    Some(a) => format!(
+                        "last frame {:.0} ms ago (frame {})",
+                        a.as_secs_f64() * 1e3,
+                        self.mocap.back().map_or(0, |m| m.frame_number)
+                    ),
+                    None => "no frame yet".into(),
+                },
+                if fresh {
+                    "active"
+                } else {
+                    "held (no capture data: setpoints uncorrected)"
+                },
+                self.run.as_ref().map_or(String::new(), |r| format!(
+                    "; this run: {} rows uncorrected, {} rows unmeasured",
+                    r.uncorrected, r.unmeasured
+                ))
+            ));
         }
         for p in &self.procs {
             let h = &p.hb;
@@ -747,15 +870,39 @@ impl Supervisor {
                 }
             }
         }
+        // Motion-capture samples (before the driver states they are matched with).
+        if let Some(sub) = &self.sub_mocap {
+            while let Ok(Some(smp)) = sub.receive() {
+                if self.mocap.len() == MOCAP_RING {
+                    self.mocap.pop_front();
+                }
+                self.mocap.push_back(*smp.payload());
+                self.mocap_at = Some(now);
+            }
+        }
         // Driver states: record.
         let mut stop = false;
+        let half_period = self.cfg.period_ms * 0.5e-3;
+        let stale_s = self.cfg.capture.as_ref().map_or(0.0, |c| c.stale_ms * 1e-3);
+        let capture = self.cfg.capture.is_some();
         while let Ok(Some(smp)) = self.sub_state.receive() {
             if let Some(run) = &mut self.run {
                 let st = smp.payload();
                 if st.run_id == run.id && !run_over(run, now) {
                     run.executed = Some(st.planned);
-                    let _ = run.recorder.row(st);
-                    run.acc.add(st);
+                    let (row, measured) = if capture {
+                        measured_by_bridge(st, &self.mocap, half_period, stale_s)
+                    } else {
+                        (*st, Measured::of_state(st))
+                    };
+                    let _ = run.recorder.row_with(&row, &measured);
+                    run.acc.add(&row);
+                    if st.task_flags & task_flags::UNCORRECTED != 0 {
+                        run.uncorrected += 1;
+                    }
+                    if measured.pose.is_none() {
+                        run.unmeasured += 1;
+                    }
                     run.settled = st.flags & pcr_messages::driver_flags::MOVING == 0;
                     if st.flags & pcr_messages::driver_flags::FAULT != 0 && run.ended.is_none() {
                         run.ended = Some((now, "drive fault"));
@@ -821,8 +968,12 @@ impl Supervisor {
         // Start the requested program once everybody is up.
         if self.opts.one_shot() {
             if !self.requested_run_started && self.all_healthy() && self.safe_stop.is_none() {
-                // Give the planner a few cycles to connect to the command service.
-                if self.procs.iter().all(|p| p.hb.seq >= 3) {
+                // Give the planner a few cycles to connect to the command service, and the
+                // capture system (if any) time to deliver its first frame.
+                let capture_ready = self.cfg.capture.is_none()
+                    || self.mocap_at.is_some()
+                    || now - self.start > startup_timeout;
+                if self.procs.iter().all(|p| p.hb.seq >= 3) && capture_ready {
                     self.requested_run_started = true;
                     let (name, c) = match (&self.opts.run_file, &self.opts.run) {
                         (Some(f), _) => (program_name(f), program_command(f)),
@@ -885,8 +1036,8 @@ impl Supervisor {
         }
         if run.acc.n == 0 {
             println!(
-                "path accuracy: not measured (no measured pose: the serial backend has no pose \
-                 sensor until the mocap bridge exists)"
+                "path accuracy: not measured (no measured pose: no capture data, and the serial \
+                 backend has no pose sensor)"
             );
         } else {
             println!(
@@ -900,6 +1051,14 @@ impl Supervisor {
             run.acc.max_phi_deg,
             run.acc.rms_phi_deg()
         );
+        }
+        if self.cfg.capture.is_some() {
+            println!(
+                "capture (QTM bridge): {} of {rows} rows measured, {} rows with the correction \
+                 held (uncorrected)",
+                rows.saturating_sub(run.unmeasured),
+                run.uncorrected
+            );
         }
         for p in &self.procs {
             println!(
@@ -933,6 +1092,7 @@ impl Supervisor {
         // The driver goes last so that it holds while the others stop.
         let order = [
             ProcessName::Planner,
+            ProcessName::Qtm,
             ProcessName::Mocap,
             ProcessName::Ik,
             ProcessName::Driver,
@@ -963,6 +1123,33 @@ impl Supervisor {
         let _ = std::fs::remove_file(&self.socket_path);
         eprintln!("pcr-supervisor: all processes stopped");
     }
+}
+
+/// The measurement of a driver-state row taken from the bridge: the newest sample captured no
+/// later than half a period after the row and no older than the stale limit. Returns the row
+/// with that pose as its measured pose (for the accuracy) and the recording's measured cells.
+fn measured_by_bridge(
+    st: &DriverStateMsg,
+    ring: &VecDeque<MocapSample>,
+    half_period_s: f64,
+    stale_s: f64,
+) -> (DriverStateMsg, Measured) {
+    let sample = ring
+        .iter()
+        .rev()
+        .find(|m| m.t_s <= st.t_s + half_period_s && st.t_s - m.t_s <= stale_s);
+    let mut row = *st;
+    row.flags &= !driver_flags::POSE_VALID;
+    let mut measured = Measured::default();
+    if let Some(m) = sample {
+        if let Some(p) = m.pose() {
+            row.measured = p;
+            row.flags |= driver_flags::POSE_VALID;
+            measured.pose = Some(p);
+        }
+        measured.joints = std::array::from_fn(|i| m.joint(i).map(|j| [j[0], j[1]]));
+    }
+    (row, measured)
 }
 
 /// A run is over (and its recording closed) at least 300 ms after it ended, once the motors are

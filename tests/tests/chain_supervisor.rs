@@ -232,7 +232,8 @@ fn run_paper_prints_the_summary_and_exits_zero() {
     let header = csv.lines().find(|l| !l.starts_with('#')).unwrap();
     assert_eq!(
         header,
-        "t_s,q1,q2,q3,x_mm,y_mm,phi_deg,xp_mm,yp_mm,phip_deg"
+        "t_s,q1,q2,q3,x_mm,y_mm,phi_deg,m1x_mm,m1y_mm,m2x_mm,m2y_mm,m3x_mm,m3y_mm,xp_mm,yp_mm,\
+         phip_deg"
     );
     assert!(csv.lines().count() > 500);
     assert!(chain.leftovers().is_empty(), "{:?}", chain.leftovers());
@@ -346,7 +347,7 @@ fn a_version_mismatched_process_is_refused() {
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(3), "{stderr}");
     assert!(stderr.contains("protocol version mismatch"), "{stderr}");
-    assert!(stderr.contains("v99") && stderr.contains("v2"), "{stderr}");
+    assert!(stderr.contains("v99") && stderr.contains("v3"), "{stderr}");
     // The chain is unaffected.
     assert!(chain.ctl("status").starts_with("state: ready"));
     // SIGINT (Ctrl-C) shuts the chain down cleanly.

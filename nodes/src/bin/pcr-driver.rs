@@ -3,7 +3,8 @@
 //! two cycles without one it holds position (stops the motors). Publishes the driver state (+
 //! event) with the measured pose when the backend has one.
 //!
-//! Backends: `sim` (interim ideal drive + FK pose sensor, later the simulated plant) and `serial`
+//! Backends: `sim` (ideal drive + FK pose sensor), `plant` (the simulated plant; with
+//! `--qtm-port` it also serves its capture view as a simulated Qualisys QTM), `fil` and `serial`
 //! (the Arduino firmware), both inside the safety stack Watchdog(PositionLimit(RateLimit(..))).
 
 use anyhow::{anyhow, Context, Result};
@@ -19,6 +20,7 @@ use pcr_kinematics::Robot;
 use pcr_messages::{
     monotonic_ns, services as s, DriverStateMsg, Heartbeat, JointSetpoint, NodeKind,
 };
+use pcr_mocap_bridge::{QtmServer, ServerConfig};
 use pcr_nodes::{chain_time_s, ports::latest, ChainNode, CommonArgs, CycleStats, ProtocolGuard};
 use pcr_plant::PlantConfig;
 use pcr_robot::RobotConfig;
@@ -49,6 +51,20 @@ struct Args {
     /// Plant configuration of the `plant` backend (default: the built-in prototype plant).
     #[arg(long)]
     plant: Option<String>,
+    /// `plant` backend: serve a simulated QTM (QTM RT protocol) with the plant's capture view
+    /// on this port (0: off). SIGUSR1 restarts it (connections closed, refused for 1 s).
+    #[arg(long, default_value_t = 0)]
+    qtm_port: u16,
+    /// Address the simulated QTM listens on.
+    #[arg(long, default_value = "127.0.0.1")]
+    qtm_bind: String,
+}
+
+/// Set by SIGUSR1: simulate a QTM restart.
+static QTM_RESTART: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+extern "C" fn on_sigusr1(_: libc::c_int) {
+    QTM_RESTART.store(true, std::sync::atomic::Ordering::SeqCst);
 }
 
 fn main() -> std::process::ExitCode {
@@ -83,7 +99,7 @@ fn run(a: Args) -> Result<()> {
                 watchdog_s,
             );
             let step = DriverStep::new(drv, FkPoseSensor::new(robot), period);
-            serve(c, cn, guard, step)
+            serve(c, cn, guard, step, None)
         }
         Backend::Plant => {
             let plant_cfg = match &a.plant {
@@ -101,10 +117,23 @@ fn run(a: Args) -> Result<()> {
                 // to the held setpoint before serving.
                 bring_to(&mut drive, start, period)?;
             }
+            let qtm = if a.qtm_port != 0 {
+                let params = pcr_control::sim_parameters(plant_rate_hz(&drive));
+                let addr = format!("{}:{}", a.qtm_bind, a.qtm_port);
+                let server = std::sync::Arc::new(
+                    QtmServer::bind(ServerConfig::new(&addr, params))
+                        .with_context(|| format!("simulated QTM on {addr}"))?,
+                );
+                drive.serve_qtm(server.clone());
+                tracing::info!(%addr, "simulated QTM serving the plant's capture view");
+                Some(server)
+            } else {
+                None
+            };
             let drv = safety_stack(drive, &robot, watchdog_s);
             let mut step = DriverStep::new(drv, sensor, period);
             step.set_frame_correction(robot_cfg.effects.frame.clone());
-            serve(c, cn, guard, step)
+            serve(c, cn, guard, step, qtm)
         }
         Backend::Fil => {
             let plant_cfg = match &a.plant {
@@ -127,14 +156,14 @@ fn run(a: Args) -> Result<()> {
             );
             let mut step = DriverStep::new(drv, SharedPose { last }, period);
             step.set_frame_correction(robot_cfg.effects.frame.clone());
-            serve(c, cn, guard, step)
+            serve(c, cn, guard, step, None)
         }
         Backend::Serial => {
             let serial = SerialDriver::open(SerialConfig::new(a.port.clone()))
                 .with_context(|| format!("serial port {}", a.port))?;
             let drv = safety_stack(serial, &robot, watchdog_s);
             let step = DriverStep::new(drv, NoPoseSensor, period);
-            serve(c, cn, guard, step)
+            serve(c, cn, guard, step, None)
         }
     }
 }
@@ -212,6 +241,11 @@ impl PoseSensor for SharedPose {
     }
 }
 
+/// The plant's capture rate, Hz.
+fn plant_rate_hz(drive: &PlantDrive) -> f64 {
+    1.0 / drive.plant().capture_model().period
+}
+
 /// Steps a fresh plant to `target` (rate-limited by the plant itself), at most 30 s.
 fn bring_to(drive: &mut PlantDrive, target: [i32; 3], period: f64) -> Result<()> {
     let cmd = pcr_driver::MotorCommand {
@@ -236,6 +270,7 @@ fn serve<D: Driver, P: PoseSensor>(
     cn: ChainNode,
     guard: ProtocolGuard,
     mut step: DriverStep<SafeDriver<D>, P>,
+    qtm: Option<std::sync::Arc<QtmServer>>,
 ) -> Result<()> {
     let kind = NodeKind::Driver;
     let sub = cn.subscriber::<JointSetpoint>(s::JOINT_SETPOINT)?;
@@ -249,6 +284,7 @@ fn serve<D: Driver, P: PoseSensor>(
     let mut stats = CycleStats::new(kind, c.protocol_version, period_ns);
     let mut fresh_since_tick = false;
     let mut fatal: Option<anyhow::Error> = None;
+    let mut sigusr1_installed = false;
 
     let ws = WaitSetBuilder::new()
         .create::<ipc::Service>()
@@ -312,6 +348,24 @@ fn serve<D: Driver, P: PoseSensor>(
             fresh_since_tick = false;
         }
         if id.has_event_from(&hb) {
+            if qtm.is_some() && !sigusr1_installed {
+                // After iceoryx2's own signal handling is set up (it claims every non-fatal
+                // signal when first used): SIGUSR1 restarts the simulated QTM.
+                // SAFETY: the handler only stores to an atomic.
+                unsafe {
+                    libc::signal(
+                        libc::SIGUSR1,
+                        on_sigusr1 as extern "C" fn(libc::c_int) as libc::sighandler_t,
+                    )
+                };
+                sigusr1_installed = true;
+            }
+            if QTM_RESTART.swap(false, std::sync::atomic::Ordering::SeqCst) {
+                if let Some(q) = &qtm {
+                    tracing::warn!("SIGUSR1: the simulated QTM restarts (down for 1 s)");
+                    q.simulate_restart(std::time::Duration::from_secs(1));
+                }
+            }
             let _ = pub_hb.send_copy(stats.heartbeat(step.holding()));
             pcr_nodes::recheck(&guard);
         }
