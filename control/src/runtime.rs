@@ -123,9 +123,7 @@ impl SimChain {
             Pose::default(),
         );
         let effects = &model_cfg.effects;
-        if let Some(l) = &effects.latency {
-            interp.set_lead(l.latency_s);
-        }
+        interp.set_lead(crate::compensation::command_lead(model_cfg, period_s));
         let mut driver = DriverStep::new(drive, sensor, period_s);
         driver.set_frame_correction(effects.frame.clone());
         Ok(InProcessChain::new(

@@ -39,8 +39,15 @@ pub struct Args {
 }
 
 fn is_backlash(rec: &Recording) -> bool {
-    rec.extra_index("motor").is_some() && rec.extra_index("amplitude_steps").is_some()
-        || rec.meta("experiment") == Some("backlash")
+    let labelled = match (rec.extra_index("motor"), rec.extra_index("amplitude_steps")) {
+        (Some(m), Some(_)) => rec.rows.iter().any(|r| {
+            r.extra
+                .get(m)
+                .is_some_and(|v| v.as_deref().is_some_and(|v| !v.is_empty()))
+        }),
+        _ => false,
+    };
+    labelled || rec.meta("experiment") == Some("backlash")
 }
 
 /// Runs `pcr evaluate`.

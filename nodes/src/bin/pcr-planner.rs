@@ -116,9 +116,10 @@ fn run(a: Args) -> Result<()> {
     pcr_nodes::realtime::apply(c.rt_priority, c.cpu, c.mlockall);
 
     let mut interp = InterpolatorStep::new(template, Pose::default());
-    if let Some(l) = &robot_cfg.effects.latency {
-        interp.set_lead(l.latency_s);
-    }
+    interp.set_lead(pcr_control::compensation::command_lead(
+        &robot_cfg,
+        c.period().as_secs_f64(),
+    ));
     // The run being planned on the worker thread, and runs whose plans are to be dropped
     // (stopped while planning).
     let mut planning: Option<u32> = None;
