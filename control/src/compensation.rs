@@ -6,24 +6,22 @@
 //!   where its output reaches the target), backlash (half the play added in the direction of
 //!   motion, so that a reversal takes the slack up at once);
 //! - compliance: the IK of the loaded model (`Robot::ik_loaded`) instead of the rigid one;
-//! - latency: the interpolator commands the pose of `t + latency` (`InterpolatorStep::set_lead`,
-//!   [`command_lead`]; one period when the file declares none, the drive's own segment time);
+//! - latency: the interpolator commands the pose of `t + period + latency`
+//!   (`InterpolatorStep::set_lead`, [`command_lead`]: the drive's own segment plus the measured
+//!   latency);
 //! - capture frame: the measured pose is corrected before it is used
 //!   (`FrameCorrection::apply`, in the driver step).
 
 use pcr_robot::effects::Effects;
 use pcr_robot::RobotConfig;
 
-/// The lead of the commanded pose over the nominal one, s: the robot file's measured
-/// command-to-motion latency (`[effects.latency]`) when it declares one, else one control
-/// period, because the drive executes each setpoint as one segment over the following cycle
-/// (driver/PROTOCOL.md: the steps evenly spaced over `cycle_ms`) and reaches it at its end.
+/// The lead of the commanded pose over the nominal one, s: one control period, because the
+/// drive executes each setpoint as one segment over the following cycle (driver/PROTOCOL.md: the
+/// steps evenly spaced over `cycle_ms`) and reaches it at its end, plus the further
+/// command-to-motion latency the robot file declares (`[effects.latency]`, measured by
+/// `pcr residuals`).
 pub fn command_lead(robot: &RobotConfig, period_s: f64) -> f64 {
-    robot
-        .effects
-        .latency
-        .as_ref()
-        .map_or(period_s, |l| l.latency_s)
+    period_s + robot.effects.latency.as_ref().map_or(0.0, |l| l.latency_s)
 }
 
 /// The motor-side compensation state of one chain. Allocation-free per cycle.

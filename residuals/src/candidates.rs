@@ -370,7 +370,7 @@ pub fn latency(ctx: &Context, train: &[usize]) -> Option<Fitted> {
         e.latency = Some(Latency { latency_s: tau });
         motor_side_delta(ctx, &e, rows)
     };
-    let grid: Vec<f64> = (0..=60).map(|k| -0.1 + 0.01 * k as f64).collect();
+    let grid: Vec<f64> = (0..=55).map(|k| -0.05 + 0.01 * k as f64).collect();
     let (tau, sse, curv) = minimise_1d(&mut |t| sse_at(ctx, &rows, &shift(t, Some(&rows))), &grid);
     let std = profile_std(sse, 3 * rows.len(), curv);
     let nui = ctx.nuisance().nui.clone();

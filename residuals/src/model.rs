@@ -2,7 +2,8 @@
 //! declares, predicting the measured pose of every row of a recording.
 //!
 //! The chain of a prediction, in the order the physics runs:
-//! 1. latency: the motors are where the command was `latency_s` earlier;
+//! 1. the drive's segment and the latency: the motors are where the command was one control
+//!    period (the drive executes a setpoint over the following cycle) plus `latency_s` earlier;
 //! 2. periodic transmission errors: the output lags the motor by `A sin(2 pi q / P + phase)`;
 //! 3. backlash: the output follows the motor through a play of `b` steps;
 //! 4. creep: the tendon lengthens by `e`, `de/dt = (gain dl - e) / T`, so the segment sees
@@ -197,10 +198,7 @@ pub fn steps_before_backlash(
     latency: Option<&Latency>,
     periodic: &[Periodic],
 ) -> Vec<[f64; 3]> {
-    let mut q: Vec<[f64; 3]> = match latency {
-        Some(l) => delayed_steps(s, l.latency_s),
-        None => s.samples.iter().map(|x| x.q).collect(),
-    };
+    let mut q = delayed_steps(s, s.period_s + latency.map_or(0.0, |l| l.latency_s));
     for p in periodic {
         let i = (p.motor as usize).clamp(1, 3) - 1;
         let ph = p.phase_deg.to_radians();

@@ -31,6 +31,9 @@ pub struct Series {
     /// Pooled within-visit standard deviation of x, y (mm) and phi (rad) of the settled rows:
     /// the capture noise of one row.
     pub row_noise: Option<[f64; 3]>,
+    /// The control period (median spacing of the rows), s: the drive reaches a commanded
+    /// setpoint one period after it was commanded (it executes it as one segment).
+    pub period_s: f64,
 }
 
 /// Why a recording cannot be analysed.
@@ -83,10 +86,18 @@ impl Series {
                 [s[0], s[1], s[2].to_radians()]
             })
         });
+        let mut dts: Vec<f64> = samples
+            .windows(2)
+            .map(|w| w[1].t_s - w[0].t_s)
+            .filter(|d| *d > 0.0)
+            .collect();
+        dts.sort_by(f64::total_cmp);
+        let period_s = dts.get(dts.len() / 2).copied().unwrap_or(0.02);
         Ok(Series {
             origin: origin.into(),
             samples,
             row_noise,
+            period_s,
         })
     }
 

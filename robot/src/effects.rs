@@ -8,8 +8,10 @@
 
 use serde::{Deserialize, Serialize};
 
-/// Command-to-motion latency: the measured motion lags the command by `latency_s`. The chain
-/// feeds it forward (the interpolator commands the pose of `t + latency_s`).
+/// Command-to-motion latency beyond the drive's own segment (which reaches a setpoint one
+/// control period after it is commanded): the measured motion lags the command by one period
+/// plus `latency_s` (capture latency included). The chain feeds it forward (the interpolator
+/// commands the pose of `t + period + latency_s`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Latency {
