@@ -1,7 +1,9 @@
 //! The simulated plant (`pcr-plant`) as the chain's drive and pose sensor.
 //!
 //! [`PlantDrive`] forwards the cycle's `write`/`read` to the plant (its elastica statics, stepper,
-//! backlash, creep and friction) and keeps the latest motion-capture sample it reports;
+//! backlash, creep and friction) and keeps the latest motion-capture sample reported by the time
+//! of the `read` (the plant simulates the cycle's segment at `write`; its later samples wait for
+//! the next cycle, so that the chain never measures its own future);
 //! [`PlantSensor`] hands that sample to the driver step as the measured pose. The capture sample
 //! is mapped into the robot frame with the plant's capture transform (what a registration would
 //! find; the correction step may refine it). The passive joints M_i of the same samples are kept
@@ -34,6 +36,10 @@ pub struct PlantDrive {
     t0: Option<f64>,
     /// The simulated QTM fed with every capture sample.
     qtm: Option<(Arc<QtmServer>, CaptureFeed)>,
+    /// Capture samples reported after the time of the last `read` (the plant simulates a whole
+    /// cycle at `write`): they are handed out when the chain's clock reaches them, so that a
+    /// row stamped t holds what the capture system reported by t.
+    pending: std::collections::VecDeque<pcr_plant::Measurement>,
 }
 
 /// The plant's motion-capture view, as the driver step's pose sensor.
@@ -57,6 +63,7 @@ pub fn plant_backend(
             joints: [None; 3],
             t0: None,
             qtm: None,
+            pending: std::collections::VecDeque::new(),
         },
         PlantSensor { last },
     ))
@@ -115,7 +122,11 @@ impl Driver for PlantDrive {
         let mut s = self.plant.read(t, period_s)?;
         s.time_s = time_s;
         self.joints = [None; 3];
-        for m in self.plant.drain_measurements() {
+        self.pending.extend(self.plant.drain_measurements());
+        while self.pending.front().is_some_and(|m| m.t_s <= t + 1e-9) {
+            let Some(m) = self.pending.pop_front() else {
+                break;
+            };
             if let Some((server, feed)) = &mut self.qtm {
                 server.push(feed.frame_of(&m));
             }

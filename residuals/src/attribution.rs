@@ -375,25 +375,31 @@ fn unphysical(
             ("beta_deg", l.beta_deg),
         ]
     };
-    let mut why = Vec::new();
-    for i in 0..3 {
-        let (n, o, d) = (
-            params(&c.legs[i]),
-            params(&current.legs[i]),
-            params(&drawing.legs[i]),
-        );
-        for k in 0..n.len() {
-            let (away, before) = ((n[k].1 - d[k].1).abs(), (o[k].1 - d[k].1).abs());
-            // Too far from the drawing, and further than the model already was.
-            if away > lim && away > before + 0.1 * lim {
-                why.push(format!(
-                    "{}[{}] {:+.2} from the drawing",
-                    n[k].0,
-                    i + 1,
-                    n[k].1 - d[k].1
-                ));
+    // How far beyond the bound a geometry is, summed over the parameters: a candidate may not
+    // push it further out (it may bring a geometry the calibration pushed out back).
+    let excess = |c: &RobotConfig| -> (f64, Vec<String>) {
+        let mut total = 0.0;
+        let mut far = Vec::new();
+        for i in 0..3 {
+            let (n, d) = (params(&c.legs[i]), params(&drawing.legs[i]));
+            for k in 0..n.len() {
+                let away = (n[k].1 - d[k].1).abs();
+                if away > lim {
+                    total += (away - lim).powi(2);
+                    far.push(format!("{}[{}] {:+.2}", n[k].0, i + 1, n[k].1 - d[k].1));
+                }
             }
         }
+        (total, far)
+    };
+    let (new_excess, far) = excess(c);
+    let (old_excess, _) = excess(current);
+    let mut why = Vec::new();
+    if new_excess > old_excess + 1e-9 {
+        why.push(format!(
+            "the geometry would leave the drawing ({}; more than {lim} mm or deg)",
+            far.join(", ")
+        ));
     }
     let e = &c.effects;
     if let Some(f) = &e.frame {
@@ -656,19 +662,6 @@ pub fn attribute(
                     noise_ms,
                 )
             };
-            let mut s = s;
-            // The model the candidate would make must be physical: its geometry near the drawing,
-            // its springs and creep positive.
-            let mut probe = config.clone();
-            (f.change)(&mut probe);
-            if let Some(why) = unphysical(&probe, &config, drawing, opts) {
-                if s.significant {
-                    s.significant = false;
-                    s.note = why;
-                } else {
-                    s.note = format!("{}; {why}", s.note);
-                }
-            }
             if f.name == "geometry" {
                 geo_significant = s.significant;
             }
@@ -690,6 +683,12 @@ pub fn attribute(
                 );
                 continue;
             };
+            // The model it makes, converged, must be physical: its geometry near the drawing, its
+            // springs and creep positive, its frame small.
+            if let Some(why) = unphysical(&next, &config, drawing, opts) {
+                mark(&mut scores, round, name, why);
+                continue;
+            }
             let ntest = nctx.test();
             let old = ctx.sse(&test, None) / test.len() as f64;
             let new = nctx.sse(&ntest, None) / ntest.len().max(1) as f64;
