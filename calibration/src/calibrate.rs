@@ -122,7 +122,8 @@ pub struct TableRow {
     pub test_rms_mm: Option<f64>,
     /// Whether all three fits converged.
     pub converged: bool,
-    /// Whether all three maps are monotonic over the data's range (else not selectable).
+    /// Whether all three maps are monotonic over the data's range and invertible up to the
+    /// robot's bending limit (else not selectable).
     pub monotonic: bool,
     /// Why a fit failed.
     pub error: Option<String>,
@@ -351,7 +352,15 @@ pub fn calibrate_data(
             train_rms_mm: complete.then(|| pooled(&legs, false)).flatten(),
             test_rms_mm: complete.then(|| pooled(&legs, true)).flatten(),
             converged: complete && legs.iter().all(|f| f.converged),
-            monotonic: complete && legs.iter().all(|f| f.monotonic),
+            monotonic: complete
+                && legs.iter().all(|f| {
+                    f.monotonic
+                        && crate::step1::reaches_bending_limit(
+                            &pcr_kinematics::TendonMap::from_spec(&f.config.tendon_map),
+                            f.config.l_c_mm,
+                            start.limits.bending_max_deg,
+                        )
+                }),
             legs,
             error,
         });

@@ -428,6 +428,14 @@ pub fn fit_leg(
     })
 }
 
+/// Whether the map can be inverted for every bending up to the robot's limit (+-bending_max
+/// over l_C): the inverse stays on its monotonic branch around dl = 0, so a map that turns
+/// back before the limit would leave poses the robot must reach without motor positions.
+pub fn reaches_bending_limit(map: &TendonMap, l_c_mm: f64, bending_max_deg: f64) -> bool {
+    let k = bending_max_deg.to_radians() / l_c_mm;
+    k.is_finite() && map.dl_for_kappa(k).is_ok() && map.dl_for_kappa(-k).is_ok()
+}
+
 /// Whether a map is strictly monotonic on [lo, hi] widened by 10 % of the span each side.
 pub fn is_monotonic(map: &TendonMap, lo: f64, hi: f64) -> bool {
     if !(lo.is_finite() && hi.is_finite()) {

@@ -14,6 +14,7 @@
 //! * [`Recorder`] (the recording format) and [`Accuracy`] (planned vs measured).
 
 pub mod accuracy;
+pub mod align;
 pub mod capture_feed;
 pub mod compensation;
 pub mod correction;
@@ -28,6 +29,7 @@ pub mod runtime;
 pub mod setpoint;
 
 pub use accuracy::Accuracy;
+pub use align::{AlignedSample, CaptureAligner};
 pub use capture_feed::{sim_parameters, CaptureFeed};
 pub use compensation::MotorCompensation;
 pub use correction::{measured_of, CorrectionConfig, CorrectionConfigError, CorrectionStep};

@@ -40,6 +40,9 @@ pub struct PlantDrive {
     /// cycle at `write`): they are handed out when the chain's clock reaches them, so that a
     /// row stamped t holds what the capture system reported by t.
     pending: std::collections::VecDeque<pcr_plant::Measurement>,
+    /// The samples handed out by the last `read`, robot frame, stamped with the time they were
+    /// reported on the caller's clock.
+    samples: Vec<pcr_plant::Measurement>,
 }
 
 /// The plant's motion-capture view, as the driver step's pose sensor.
@@ -64,6 +67,7 @@ pub fn plant_backend(
             t0: None,
             qtm: None,
             pending: std::collections::VecDeque::new(),
+            samples: Vec::new(),
         },
         PlantSensor { last },
     ))
@@ -98,6 +102,13 @@ impl PlantDrive {
     pub fn joints(&self) -> [Option<Vec2>; 3] {
         self.joints
     }
+
+    /// Every capture sample the last `read` handed out (robot frame), each stamped with the
+    /// time it was reported on the caller's clock (measurement time + the capture latency):
+    /// what a recorder aligns by measurement time ([`crate::CaptureAligner`]).
+    pub fn samples(&self) -> &[pcr_plant::Measurement] {
+        &self.samples
+    }
 }
 
 impl PlantDrive {
@@ -122,6 +133,8 @@ impl Driver for PlantDrive {
         let mut s = self.plant.read(t, period_s)?;
         s.time_s = time_s;
         self.joints = [None; 3];
+        self.samples.clear();
+        let offset = time_s - t;
         self.pending.extend(self.plant.drain_measurements());
         while self.pending.front().is_some_and(|m| m.t_s <= t + 1e-9) {
             let Some(m) = self.pending.pop_front() else {
@@ -131,6 +144,10 @@ impl Driver for PlantDrive {
                 server.push(feed.frame_of(&m));
             }
             let m = m.in_robot_frame(&self.frame);
+            self.samples.push(pcr_plant::Measurement {
+                t_s: m.t_s + offset,
+                ..m
+            });
             if let Some(p) = m.pose {
                 self.last.set(Some(Pose::new(p[0], p[1], p[2])));
             }

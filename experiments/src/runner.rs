@@ -14,7 +14,9 @@ use crate::annotate::{Annotator, Tolerances, EXTRA_COLUMNS};
 use crate::calibration::round_dec;
 use crate::design::Design;
 use crate::program::{program_of, ProgramCommand, ProgramError};
-use pcr_control::{command_of_moves, CommandError, PlanError, SimChain};
+use pcr_control::{
+    command_of_moves, AlignedSample, CaptureAligner, CommandError, PlanError, SimChain,
+};
 use pcr_messages::{driver_flags, planner_state, DriverStateMsg};
 use pcr_plant::PlantConfig;
 use pcr_recording::{RecordingError, RecordingWriter, Row, KNOWN_COLUMNS};
@@ -41,6 +43,11 @@ pub struct RunSetup {
     pub metadata: Vec<(String, String)>,
     /// Tolerances of the annotator.
     pub tolerances: Tolerances,
+    /// The capture system's declared latency, s (the supervisor configuration's
+    /// `[capture] latency_ms`): with it, each row's measured cells hold the capture sample
+    /// measured nearest to the row's time ([`pcr_control::CaptureAligner`]); without it, the
+    /// latest sample reported by the row's time.
+    pub capture_latency_s: Option<f64>,
 }
 
 /// What a run produced.
@@ -138,6 +145,40 @@ pub fn row_of_state(t_s: f64, st: &DriverStateMsg, joints: [Option<Vec2>; 3]) ->
     row
 }
 
+/// What one capture sample saw: the platform pose (x mm, y mm, phi rad) and the M_i.
+type CaptureCells = (Option<[f64; 3]>, [Option<Vec2>; 3]);
+
+fn push_samples(a: &mut CaptureAligner<Row, CaptureCells>, samples: &[pcr_plant::Measurement]) {
+    for m in samples {
+        a.push_sample(m.t_s, (m.pose, m.m));
+    }
+}
+
+/// The row's measured cells from the samples measured near its time (nearest first): per body
+/// the nearest sample that saw it; empty where none did.
+fn fill_measured(row: &mut Row, cands: &[AlignedSample<CaptureCells>]) {
+    let mm = |v: f64| Some(round_dec(v, 4));
+    let deg = |v: f64| Some(round_dec(v.to_degrees(), 5));
+    row.pose = [None; 3];
+    if let Some(p) = cands
+        .iter()
+        .find_map(|s| s.value.0)
+        .filter(|p| p.iter().all(|v| v.is_finite()))
+    {
+        row.pose = [mm(p[0]), mm(p[1]), deg(p[2])];
+    }
+    for (i, cell) in row.m.iter_mut().enumerate() {
+        *cell = [None; 2];
+        if let Some(p) = cands
+            .iter()
+            .find_map(|s| s.value.1[i])
+            .filter(|p| p.iter().all(|v| v.is_finite()))
+        {
+            *cell = [mm(p[0]), mm(p[1])];
+        }
+    }
+}
+
 /// What a refused command's offending move does.
 fn refused_what(cmd: &ProgramCommand, e: &CommandError) -> String {
     let index = match e {
@@ -180,6 +221,13 @@ pub fn run_in_process<W: Write>(
     meta.push(("period_s".into(), pcr_recording::number(setup.period_s)));
     meta.push(("plant_seed".into(), setup.plant.seed.to_string()));
     meta.push(("commands".into(), program.commands.len().to_string()));
+    if let Some(l) = setup.capture_latency_s {
+        meta.push(("capture_latency_s".into(), pcr_recording::number(l)));
+        meta.push((
+            "measured_at".into(),
+            "capture time (each row holds the sample measured nearest its t_s)".into(),
+        ));
+    }
     let mut w = RecordingWriter::new(out, &meta, &KNOWN_COLUMNS, &EXTRA_COLUMNS)?;
     let mut ann = Annotator::new(design, setup.tolerances);
     let n_cmd = program.commands.len();
@@ -192,6 +240,22 @@ pub fn run_in_process<W: Write>(
         settled_rows: 0,
         pose_dropouts: 0,
     };
+    // Capture samples are 10 ms apart in the plant (100 Hz); a row takes a sample measured
+    // within half a control period of its time.
+    let mut aligner: Option<CaptureAligner<Row, CaptureCells>> = setup
+        .capture_latency_s
+        .map(|l| CaptureAligner::new(l, 0.5 * setup.period_s));
+    let mut emit =
+        |row: &mut Row, ann: &mut Annotator, summary: &mut RunSummary| -> Result<(), RunnerError> {
+            let label = ann.annotate(row);
+            let cells = label.extra_cells();
+            let cells: [Option<&str>; 3] = std::array::from_fn(|i| cells[i].as_deref());
+            w.write_row_text(row, &cells)?;
+            summary.rows += 1;
+            summary.settled_rows += usize::from(label.settled);
+            summary.pose_dropouts += usize::from(row.pose[0].is_none());
+            Ok(())
+        };
     for (c, cmd) in program.commands.iter().enumerate() {
         let refused = |why: String, what: String| RunnerError::Refused {
             command: c + 1,
@@ -216,13 +280,18 @@ pub fn run_in_process<W: Write>(
             let t_row = round_dec(k as f64 * setup.period_s, 6);
             let mut row = row_of_state(t_row, &o.state, chain.plant_drive().joints());
             k += 1;
-            let label = ann.annotate(&mut row);
-            let cells = label.extra_cells();
-            let cells: [Option<&str>; 3] = std::array::from_fn(|i| cells[i].as_deref());
-            w.write_row_text(&row, &cells)?;
-            summary.rows += 1;
-            summary.settled_rows += usize::from(label.settled);
-            summary.pose_dropouts += usize::from(row.pose[0].is_none());
+            match &mut aligner {
+                None => emit(&mut row, &mut ann, &mut summary)?,
+                Some(a) => {
+                    // The drive read at t_s: samples reported by t_s are in.
+                    push_samples(a, chain.plant_drive().samples());
+                    a.push_row(t_s, row);
+                    for (_, mut row, cands) in a.ready(t_s) {
+                        fill_measured(&mut row, &cands);
+                        emit(&mut row, &mut ann, &mut summary)?;
+                    }
+                }
+            }
             let st = chain.interp.status(chain.time_s());
             if st.state != planner_state::RUNNING && st.state != planner_state::PAUSED {
                 break;
@@ -239,6 +308,30 @@ pub fn run_in_process<W: Write>(
             }
         }
         progress((c + 1) as f64 / n_cmd as f64);
+    }
+    // The last rows wait for the samples measured at their time: run the chain (at rest) until
+    // they have been reported, without new rows.
+    if let Some(a) = &mut aligner {
+        let t_end = chain.time_s();
+        while a.waiting() > 0 {
+            let t_s = chain.time_s();
+            chain.cycle().map_err(|e| RunnerError::Driver {
+                t_s,
+                message: e.to_string(),
+            })?;
+            push_samples(a, chain.plant_drive().samples());
+            for (_, mut row, cands) in a.ready(t_s) {
+                fill_measured(&mut row, &cands);
+                emit(&mut row, &mut ann, &mut summary)?;
+            }
+            if t_s > t_end + 1.0 + a.delay_s() {
+                break;
+            }
+        }
+        for (_, mut row, cands) in a.flush() {
+            fill_measured(&mut row, &cands);
+            emit(&mut row, &mut ann, &mut summary)?;
+        }
     }
     w.into_inner()?;
     summary.duration_s = chain.time_s();

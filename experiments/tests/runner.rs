@@ -24,6 +24,7 @@ fn setup(plant: PlantConfig) -> RunSetup {
             ("created".into(), "2026-01-01T00:00:00Z".into()),
         ],
         tolerances: Tolerances::default(),
+        capture_latency_s: None,
     }
 }
 

@@ -36,6 +36,10 @@ pub struct TendonMap {
     /// Coefficients with k0 first (k0 = 0 for families without an offset).
     k: [f64; 7],
     n: usize,
+    /// The interval around dl = 0 (within +-[`DL_SEARCH_MM`]) on which the map is strictly
+    /// monotonic: the branch the inverse searches, so that a map that turns back far from
+    /// the operating range (a cubic with a negative k3) is inverted on the physical branch.
+    branch: [f64; 2],
 }
 
 #[inline]
@@ -74,11 +78,71 @@ impl TendonMap {
         for (j, c) in coeffs.iter().take(kind.n_coeffs()).enumerate() {
             k[j + off] = *c;
         }
-        TendonMap {
+        let mut m = TendonMap {
             kind,
             k,
             n: kind.n_coeffs() + off,
+            branch: [-DL_SEARCH_MM, DL_SEARCH_MM],
+        };
+        m.branch = m.monotone_branch();
+        m
+    }
+
+    /// The interval around dl = 0 where the slope keeps the sign it has at 0 (boundaries to
+    /// 1e-6 mm; a coarse scan at 0.25 mm finds where it turns).
+    fn monotone_branch(&self) -> [f64; 2] {
+        let sign0 = (self.kappa(1e-6) - self.kappa(-1e-6)).signum();
+        if sign0 == 0.0 || !sign0.is_finite() {
+            return [0.0, 0.0];
         }
+        let keeps = |x: f64| {
+            let s = self.kappa_and_slope(x).1;
+            s.is_finite() && s * sign0 > 0.0
+        };
+        let mut out = [-DL_SEARCH_MM, DL_SEARCH_MM];
+        for (side, dir) in [-1.0f64, 1.0].into_iter().enumerate() {
+            const STEP: f64 = 0.25;
+            let mut inside = 0.0;
+            loop {
+                let next = inside + dir * STEP;
+                if next.abs() >= DL_SEARCH_MM {
+                    if !keeps(dir * DL_SEARCH_MM) {
+                        let (mut a, mut b) = (inside, dir * DL_SEARCH_MM);
+                        while (b - a).abs() > 1e-6 {
+                            let m = 0.5 * (a + b);
+                            if keeps(m) {
+                                a = m;
+                            } else {
+                                b = m;
+                            }
+                        }
+                        out[side] = a;
+                    }
+                    break;
+                }
+                if !keeps(next) {
+                    let (mut a, mut b) = (inside, next);
+                    while (b - a).abs() > 1e-6 {
+                        let m = 0.5 * (a + b);
+                        if keeps(m) {
+                            a = m;
+                        } else {
+                            b = m;
+                        }
+                    }
+                    out[side] = a;
+                    break;
+                }
+                inside = next;
+            }
+        }
+        out
+    }
+
+    /// The interval of tendon displacements (mm) around 0 on which the map is strictly
+    /// monotonic (within +-[`DL_SEARCH_MM`]): where [`TendonMap::dl_for_kappa`] searches.
+    pub fn invertible_range(&self) -> [f64; 2] {
+        self.branch
     }
 
     /// The family.
@@ -177,8 +241,9 @@ impl TendonMap {
         }
     }
 
-    /// Inverse: the tendon displacement (mm) that gives curvature `kappa` (1/mm), searched in
-    /// |dl| <= [`DL_SEARCH_MM`]. The map must be monotonic there (every calibrated map of a real
+    /// Inverse: the tendon displacement (mm) that gives curvature `kappa` (1/mm), searched on
+    /// the map's monotonic branch around dl = 0 ([`TendonMap::invertible_range`], within
+    /// |dl| <= [`DL_SEARCH_MM`]); a curvature beyond that branch is out of range. (Every calibrated map of a real
     /// segment is).
     pub fn dl_for_kappa(&self, kappa: f64) -> Result<f64, TendonMapError> {
         if self.kind == TendonMapKind::Linear || self.kind == TendonMapKind::Affine {
@@ -191,7 +256,10 @@ impl TendonMap {
             }
             return Ok(dl);
         }
-        let (mut lo, mut hi) = (-DL_SEARCH_MM, DL_SEARCH_MM);
+        let [mut lo, mut hi] = self.branch;
+        if hi - lo <= 0.0 {
+            return Err(TendonMapError::NotMonotonic(self.kind));
+        }
         let (flo, fhi) = (self.kappa(lo) - kappa, self.kappa(hi) - kappa);
         if flo * fhi > 0.0 {
             return Err(self.out_of_range(kappa));
@@ -229,8 +297,8 @@ impl TendonMap {
     }
 
     fn out_of_range(&self, kappa: f64) -> TendonMapError {
-        let a = self.kappa(-DL_SEARCH_MM);
-        let b = self.kappa(DL_SEARCH_MM);
+        let a = self.kappa(self.branch[0]);
+        let b = self.kappa(self.branch[1]);
         TendonMapError::OutOfRange {
             kappa,
             lo: a.min(b),
@@ -365,6 +433,24 @@ mod tests {
         ));
         let m = TendonMap::new(TendonMapKind::Linear, &[0.0]);
         assert!(m.dl_for_kappa(0.1).is_err());
+        // A cubic that turns back at about +-30 mm (negative k3): inverted on the branch
+        // through 0, never on the outer branch where the same curvature comes back.
+        let m = TendonMap::new(TendonMapKind::Poly3, &[0.0, 1.1e-3, 1.2e-6, -4.1e-7]);
+        let [lo, hi] = m.invertible_range();
+        let turn = |x: f64| 1.1e-3 + 2.0 * 1.2e-6 * x.abs() + 3.0 * -4.1e-7 * x * x;
+        assert!(
+            turn(lo).abs() < 1e-8 && turn(hi).abs() < 1e-8,
+            "[{lo}, {hi}]"
+        );
+        assert!(lo < -25.0 && hi > 25.0);
+        for dl in [-20.0, -5.0, 0.3, 12.0, 25.0] {
+            let back = m.dl_for_kappa(m.kappa(dl)).expect("on the branch");
+            assert!((back - dl).abs() < 1e-9, "{dl} -> {back}");
+        }
+        assert!(matches!(
+            m.dl_for_kappa(m.kappa(hi) + 1e-4),
+            Err(TendonMapError::OutOfRange { .. })
+        ));
     }
 
     #[test]

@@ -278,19 +278,38 @@ pub fn run(args: Args) -> Result<()> {
 
 /// The robot model, the plant's robot and the plant of a run, with their names for the
 /// metadata.
-struct Sources {
+#[derive(Clone)]
+pub(crate) struct Sources {
     model: RobotConfig,
     model_name: String,
     plant_robot: RobotConfig,
     plant_robot_name: String,
     plant: PlantConfig,
     plant_name: String,
+    /// The configuration's `[capture] latency_ms`, s.
+    capture_latency_s: Option<f64>,
 }
 
 impl Sources {
     fn load(run: &RunArgs) -> Result<Sources> {
-        let cfg_name = run.config.display().to_string();
-        let text = std::fs::read_to_string(&run.config)
+        Sources::from_files(
+            &run.config,
+            run.robot.as_deref(),
+            run.plant.as_deref(),
+            run.plant_seed,
+        )
+    }
+
+    /// The sources of a supervisor configuration, with optional replacements of the model and
+    /// the plant (see `pcr experiment --help`).
+    pub(crate) fn from_files(
+        config: &Path,
+        robot: Option<&Path>,
+        plant: Option<&Path>,
+        plant_seed: Option<u64>,
+    ) -> Result<Sources> {
+        let cfg_name = config.display().to_string();
+        let text = std::fs::read_to_string(config)
             .with_context(|| format!("--config {cfg_name}: cannot read the file"))?;
         let table: toml::Table = toml::from_str(&text)
             .with_context(|| format!("--config {cfg_name}: not a valid TOML file"))?;
@@ -302,23 +321,33 @@ impl Sources {
         };
         let plant_robot = RobotConfig::load(&robot_path)
             .with_context(|| format!("--config {cfg_name}: robot = {robot_path:?}"))?;
-        let (model, model_name) = match &run.robot {
+        let (model, model_name) = match robot {
             Some(p) => (
                 RobotConfig::load(p).with_context(|| format!("--robot {}", p.display()))?,
                 p.display().to_string(),
             ),
             None => (plant_robot.clone(), robot_path.clone()),
         };
-        let (mut plant, plant_name) = match &run.plant {
+        let (mut plant, plant_name) = match plant {
             Some(p) => (
                 PlantConfig::load(p).with_context(|| format!("--plant {}", p.display()))?,
                 p.display().to_string(),
             ),
             None => plant_of_config(&table, &cfg_name)?,
         };
-        if let Some(s) = run.plant_seed {
+        if let Some(s) = plant_seed {
             plant.seed = s;
         }
+        let capture_latency_s = match table.get("capture").and_then(|c| c.get("latency_ms")) {
+            None => None,
+            Some(v) => match v.as_float().or_else(|| v.as_integer().map(|i| i as f64)) {
+                Some(ms) if ms.is_finite() && (0.0..=1000.0).contains(&ms) => Some(ms * 1e-3),
+                _ => bail!(
+                    "--config {cfg_name}: [capture] latency_ms = {v}: must be a number of \
+                     milliseconds in 0..=1000"
+                ),
+            },
+        };
         Ok(Sources {
             model,
             model_name,
@@ -326,11 +355,26 @@ impl Sources {
             plant_robot_name: robot_path,
             plant,
             plant_name,
+            capture_latency_s,
         })
     }
 
-    fn model_robot(&self) -> Result<Robot> {
+    pub(crate) fn model_robot(&self) -> Result<Robot> {
         Robot::new(&self.model).with_context(|| format!("robot model {}", self.model_name))
+    }
+
+    /// The same plant driven by another model.
+    pub(crate) fn with_model(&self, model: RobotConfig, name: String) -> Sources {
+        Sources {
+            model,
+            model_name: name,
+            ..self.clone()
+        }
+    }
+
+    /// The plant's own robot (the configuration's `robot`).
+    pub(crate) fn plant_robot(&self) -> &RobotConfig {
+        &self.plant_robot
     }
 }
 
@@ -394,13 +438,24 @@ fn created() -> Result<String> {
 }
 
 fn execute(design: Design, run: &RunArgs, src: Sources) -> Result<()> {
+    record(design, src, run.seed, &run.out).map(|_| ())
+}
+
+/// Runs `design` on the in-process chain against the sources' plant and writes the annotated
+/// recording to `out` (progress bar on stderr, one summary line on stdout).
+pub(crate) fn record(
+    design: Design,
+    src: Sources,
+    seed: u64,
+    out: &Path,
+) -> Result<pcr_experiments::RunSummary> {
     let kind = design.kind();
     let setup = RunSetup {
         model: src.model,
         plant_robot: src.plant_robot,
         plant: src.plant,
         period_s: 0.02,
-        seed: run.seed,
+        seed,
         metadata: vec![
             ("robot".into(), src.model_name),
             ("plant".into(), src.plant_name),
@@ -415,13 +470,14 @@ fn execute(design: Design, run: &RunArgs, src: Sources) -> Result<()> {
             ("created".into(), created()?),
         ],
         tolerances: Tolerances::default(),
+        capture_latency_s: src.capture_latency_s,
     };
-    let out_name = run.out.display().to_string();
-    if let Some(dir) = run.out.parent().filter(|d| !d.as_os_str().is_empty()) {
+    let out_name = out.display().to_string();
+    if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("--out {out_name}: cannot create its folder"))?;
     }
-    let file = std::fs::File::create(&run.out)
+    let file = std::fs::File::create(out)
         .with_context(|| format!("--out {out_name}: cannot create the file"))?;
     let pb = ProgressBar::new(1000);
     pb.set_style(
@@ -447,7 +503,7 @@ fn execute(design: Design, run: &RunArgs, src: Sources) -> Result<()> {
         s.settled_rows,
         s.pose_dropouts
     );
-    Ok(())
+    Ok(s)
 }
 
 fn design_calibration(

@@ -12,6 +12,7 @@ mod experiment;
 mod figures_kin;
 mod figures_plan;
 mod kin;
+mod loop_cmd;
 mod plan;
 mod plant;
 mod profile;
@@ -49,6 +50,9 @@ enum Command {
     /// Find what the calibrated model lacks: residuals, candidate effects, held-out attribution,
     /// and the extended robot file.
     Residuals(residuals::Args),
+    /// The whole loop on the simulated plant: record, calibrate, analyse the residuals,
+    /// extend the model, re-run with every model and report the error on the robot.
+    Loop(loop_cmd::Args),
     /// The paper's experiments (calibration, repeatability, paths, backlash) on the in-process
     /// chain against the simulated plant, and the calibration pose set.
     Experiment(experiment::Args),
@@ -75,6 +79,7 @@ fn main() -> std::process::ExitCode {
         Command::Calibrate(a) => calibrate::run(a),
         Command::Evaluate(a) => evaluate::run(a),
         Command::Residuals(a) => residuals::run(a),
+        Command::Loop(a) => loop_cmd::run(a),
         Command::Experiment(a) => experiment::run(a),
         Command::Qtm(a) => qtm::run(a),
     };

@@ -63,6 +63,23 @@ fn read_all(paths: &[PathBuf]) -> anyhow::Result<Vec<(Recording, Series)>> {
         .collect()
 }
 
+/// The extended robot file of an analysis, with a header naming the effects.
+pub(crate) fn extended_file(res: &pcr_residuals::Attribution, created: &str) -> String {
+    format!(
+        "# Extended robot written by `pcr residuals` ({created}): effects {}.\n{}",
+        if res.effects.is_empty() {
+            "none".to_string()
+        } else {
+            res.effects
+                .iter()
+                .map(|e| e.name.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
+        },
+        res.robot.to_toml_string()
+    )
+}
+
 /// Runs `pcr residuals`.
 pub fn run(a: Args) -> anyhow::Result<()> {
     if !(a.block_s > 0.0 && a.block_s.is_finite()) {
@@ -180,16 +197,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         );
     }
     if let Some(o) = &a.out {
-        let text = format!(
-            "# Extended robot written by `pcr residuals` ({}): effects {}.\n{}",
-            utc_now(),
-            res.effects
-                .iter()
-                .map(|e| e.name.as_str())
-                .collect::<Vec<_>>()
-                .join(", "),
-            res.robot.to_toml_string()
-        );
+        let text = extended_file(&res, &utc_now());
         std::fs::write(o, text).with_context(|| format!("cannot write {}", o.display()))?;
         println!("extended robot: {}", o.display());
     }

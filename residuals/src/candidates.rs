@@ -687,9 +687,15 @@ pub fn tendon_map(ctx: &Context, train: &[usize]) -> Option<Fitted> {
                         (dl, current.kappa(dl) + corr(dl))
                     })
                     .collect();
-                // The new map must stay invertible over the data's range, or it is not used.
+                // The new map must stay invertible over the data's range and up to the robot's
+                // bending limit (the chain must reach every pose it could before), or it is
+                // not used.
+                let bending_max = c.limits.bending_max_deg;
+                let l_c = c.legs[leg].l_c_mm;
                 if let Some(spec) = best_family(&target).filter(|spec| {
-                    pcr_calibration::step1::is_monotonic(&TendonMap::from_spec(spec), lo, hi)
+                    let m = TendonMap::from_spec(spec);
+                    pcr_calibration::step1::is_monotonic(&m, lo, hi)
+                        && pcr_calibration::step1::reaches_bending_limit(&m, l_c, bending_max)
                 }) {
                     c.legs[leg].tendon_map = spec;
                 }

@@ -210,6 +210,10 @@ pub struct CaptureConfig {
     pub stale_ms: f64,
     /// Ask QTM for about this many frames per second (default: all frames).
     pub frequency: Option<u32>,
+    /// The capture system's latency from measurement to report, ms, as measured by the lab
+    /// (e.g. QTM's real-time latency measurement): recorders that align the measured columns
+    /// with the rows by capture time (`pcr experiment`) subtract it. Default: none declared.
+    pub latency_ms: Option<f64>,
 }
 
 impl CaptureConfig {

@@ -122,12 +122,23 @@ fn prototype_geometry_and_true_map_calibrate_down_to_the_noise() {
     assert!(before.pose.position_rms_mm > 20.0 * test.pose.position_rms_mm);
     // Table I: the logarithms without a linear term are by far the worst (as in the paper),
     // the one-coefficient linear map is worse than the selected one, and the selected function
-    // is within 0.01 mm of the best test RMS.
+    // is the best of the selectable ones (invertible over the data and up to the bending limit)
+    // and within 0.01 mm of the best test RMS.
     let rms = |i: usize| cal.table1[i - 1].test_rms_mm.unwrap();
     let best = (1..=13).map(rms).fold(f64::INFINITY, f64::min);
     assert!(rms(10) > 20.0 * best && rms(11) > 20.0 * best);
     assert!(rms(1) > 3.0 * rms(cal.selected));
-    assert!(rms(cal.selected) <= best + 1e-12);
+    let best_selectable = (1..=13)
+        .filter(|i| cal.table1[i - 1].monotonic)
+        .map(rms)
+        .fold(f64::INFINITY, f64::min);
+    assert!(rms(cal.selected) <= best_selectable + 1e-12);
+    assert!(
+        rms(cal.selected) <= best + 0.01,
+        "selected {} at {} mm, best {best} mm",
+        cal.selected,
+        rms(cal.selected)
+    );
     assert!(cal.table1.iter().all(|r| r.error.is_none()));
 }
 

@@ -30,6 +30,7 @@ fn record(model: &RobotConfig, plant: &PlantConfig, design: &Design) -> Recordin
         seed: 1,
         metadata: vec![],
         tolerances: Tolerances::default(),
+        capture_latency_s: None,
     };
     let mut out = Vec::new();
     run_in_process(design, &setup, &mut out, &mut |_| {}).unwrap();
