@@ -10,7 +10,10 @@
 //!   first row whose planned pose equals the visit's target (within the tolerances) and equals
 //!   the previous row's planned pose (the planned motion has stopped). The dwell lasts while
 //!   the planned pose stays at that pose; its rows carry `pose_id`, `rep`, `set`, and
-//!   `settled = 1` once `t_s - t_start >= settle_s` (before that `settled = 0`). The first row
+//!   `settled = 1` once `t_s - t_start >= settle_s` (before that `settled = 0`) and while the
+//!   commanded motor positions stay those of the previous row: the chain commands one period
+//!   ahead of the plan, so the last rows of a dwell may already carry the next move's first
+//!   steps, and a changed command ends the measurement of the visit. The first row
 //!   whose planned pose differs ends the dwell and the visit; the next visit is looked for from
 //!   there. All other rows (approach, return) are unlabelled, with `settled = 0`. A pause
 //!   (planned pose held away from the target) starts no dwell; a pause in a dwell lengthens it.
@@ -120,8 +123,14 @@ enum Plan {
 enum Phase {
     /// Looking for the next item.
     Waiting,
-    /// In a visit's dwell since `t0`, planned pose `anchor`.
-    Dwell { t0: f64, anchor: [f64; 3] },
+    /// In a visit's dwell since `t0`, planned pose `anchor`; `over` once the commanded motor
+    /// positions changed after the measurement began (the next move has started: the chain
+    /// commands one period ahead of the plan).
+    Dwell {
+        t0: f64,
+        anchor: [f64; 3],
+        over: bool,
+    },
     /// On the current path.
     OnPath,
     /// In a backlash block: reached home + n since the last return, returns so far.
@@ -136,6 +145,7 @@ pub struct Annotator {
     next: usize,
     phase: Phase,
     prev_planned: Option<[f64; 3]>,
+    prev_q: Option<[i32; 3]>,
 }
 
 impl Annotator {
@@ -168,6 +178,7 @@ impl Annotator {
             next: 0,
             phase: Phase::Waiting,
             prev_planned: None,
+            prev_q: None,
         }
     }
 
@@ -223,11 +234,12 @@ impl Annotator {
             _ => None,
         };
         let label = match &self.plan {
-            Plan::Visits { .. } => self.label_visit(row.t_s, planned),
+            Plan::Visits { .. } => self.label_visit(row.t_s, planned, row.q),
             Plan::Paths(_) => self.label_path(planned),
             Plan::Backlash { .. } => self.label_backlash(row.q),
         };
         self.prev_planned = planned;
+        self.prev_q = Some(row.q);
         label
     }
 
@@ -238,19 +250,25 @@ impl Annotator {
         l
     }
 
-    fn label_visit(&mut self, t_s: f64, planned: Option<[f64; 3]>) -> Label {
+    fn label_visit(&mut self, t_s: f64, planned: Option<[f64; 3]>, q: [i32; 3]) -> Label {
         let Plan::Visits { targets, settle_s } = &self.plan else {
             return Label::default();
         };
         let settle_s = *settle_s;
-        if let Phase::Dwell { t0, anchor } = self.phase {
+        if let Phase::Dwell { t0, anchor, over } = self.phase {
             if planned.is_some_and(|p| self.same(p, anchor)) {
                 let t = &targets[self.next];
+                // Settled: the settle time has passed and the motors are still where they
+                // were (a changed command ends the measurement of this visit).
+                let timed = t_s - t0 >= settle_s - 1e-9;
+                let moved = self.prev_q.is_some_and(|p| p != q);
+                let over = over || (timed && moved);
+                self.phase = Phase::Dwell { t0, anchor, over };
                 return Label {
                     pose_id: Some(t.pose_id),
                     rep: Some(t.rep),
                     set: Some(t.set),
-                    settled: t_s - t0 >= settle_s - 1e-9,
+                    settled: timed && !over && !moved,
                     ..Label::default()
                 };
             }
@@ -263,7 +281,11 @@ impl Annotator {
             return Label::default();
         };
         if self.same(p, t.pose) && self.same(p, prev) {
-            self.phase = Phase::Dwell { t0: t_s, anchor: p };
+            self.phase = Phase::Dwell {
+                t0: t_s,
+                anchor: p,
+                over: false,
+            };
             return Label {
                 pose_id: Some(t.pose_id),
                 rep: Some(t.rep),

@@ -380,3 +380,40 @@ fn backlash_blocks_are_recognised_from_the_commanded_steps() {
     assert!(ann.finished());
     assert_eq!(ann.found(), 4);
 }
+
+#[test]
+fn a_command_that_moves_during_the_dwell_ends_the_measurement() {
+    let timing = VisitTiming {
+        speed_mm_s: 40.0,
+        settle_s: 0.4,
+        measure_s: 0.3,
+    };
+    let v = visits();
+    let d = static_design(v.clone(), timing);
+    let mut rows = static_rows(&v, 0.7, 0.0, 0.0, &[], None);
+    // In visit 0's dwell, the commanded motors step once 0.6 s after the dwell began (the next
+    // move's first step, commanded one period ahead of the plan), with the planned pose still
+    // at the target.
+    let first = rows
+        .iter()
+        .position(|(_, t)| {
+            *t == Truth::AtRest {
+                visit: 0,
+                first: true,
+            }
+        })
+        .unwrap();
+    for (r, _) in rows.iter_mut().skip(first + 30).take(5) {
+        r.q[1] += 1;
+    }
+    let mut ann = Annotator::new(&d, Tolerances::default());
+    let settled: Vec<bool> = rows.iter().map(|(r, _)| ann.label(r).settled).collect();
+    // Visit 0 (its dwell begins on the row after the arriving one): settled from 0.4 s into
+    // the dwell up to the row before the step; none after it, even where the command comes
+    // back.
+    let in_dwell0: Vec<usize> = (first..first + 35).filter(|i| settled[*i]).collect();
+    assert_eq!(in_dwell0, (first + 21..first + 30).collect::<Vec<_>>());
+    // The other visits are untouched.
+    let n: usize = settled.iter().filter(|s| **s).count();
+    assert_eq!(n, 9 + 3 * 14);
+}

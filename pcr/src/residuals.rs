@@ -33,7 +33,7 @@ pub struct Args {
     #[arg(long, default_value_t = 4.0)]
     block_s: f64,
     /// Family-wise significance level of a round.
-    #[arg(long, default_value_t = 1e-3)]
+    #[arg(long, default_value_t = 1e-2)]
     alpha: f64,
     /// Smallest held-out RMS gain worth claiming, mm.
     #[arg(long, default_value_t = 0.01)]

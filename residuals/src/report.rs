@@ -63,7 +63,8 @@ pub fn write_report(dir: &Path, a: &Attribution, inputs: &str) -> Result<PathBuf
     let _ = writeln!(
         md,
         "\n**Verdict: {}**. Remaining held-out RMS of the weighted residual {:.3} mm, {:.3} mm above \
-         what the capture noise explains.\n\n![residual over time](residual_time.svg)",
+         what the capture noise explains.\n\n![residual over time](residual_time.svg)\n\n\
+         (Each mark is the largest residual of a short run of consecutive held-out rows.)",
         match a.verdict {
             Verdict::Explained => "explained",
             Verdict::PartlyExplained => "partly explained",
@@ -140,9 +141,20 @@ pub fn write_report(dir: &Path, a: &Attribution, inputs: &str) -> Result<PathBuf
         path: path.display().to_string(),
         source,
     })?;
-    // Figures.
-    let before: Vec<(f64, f64)> = a.residual_time.iter().map(|p| (p.0, p.1)).collect();
-    let after: Vec<(f64, f64)> = a.residual_time.iter().map(|p| (p.0, p.2)).collect();
+    // Figures (at most a few thousand marks each: the largest residual of each run of rows
+    // over time, every k-th point of the scatter plots).
+    let before: Vec<(f64, f64)> = chunk_max(
+        &a.residual_time
+            .iter()
+            .map(|p| (p.0, p.1))
+            .collect::<Vec<_>>(),
+    );
+    let after: Vec<(f64, f64)> = chunk_max(
+        &a.residual_time
+            .iter()
+            .map(|p| (p.0, p.2))
+            .collect::<Vec<_>>(),
+    );
     curve_panels(
         &dir.join("residual_time.svg"),
         "Position residual of held-out rows over time",
@@ -168,7 +180,7 @@ pub fn write_report(dir: &Path, a: &Attribution, inputs: &str) -> Result<PathBuf
             &format!("{name}: held-out residual along its predicted change"),
             &[CurvePanel {
                 title: name.clone(),
-                points: pts.clone(),
+                points: every_kth(pts),
                 curves: vec![("explained exactly".into(), 0, vec![(0.0, 0.0), (m, m)])],
             }],
             "change the effect predicts (mm)",
@@ -181,7 +193,7 @@ pub fn write_report(dir: &Path, a: &Attribution, inputs: &str) -> Result<PathBuf
             &format!("remaining {comp} residual over {feat}"),
             &[CurvePanel {
                 title: feat.clone(),
-                points: pts.clone(),
+                points: every_kth(pts),
                 curves: vec![],
             }],
             feat,
@@ -189,4 +201,22 @@ pub fn write_report(dir: &Path, a: &Attribution, inputs: &str) -> Result<PathBuf
         )?;
     }
     Ok(path)
+}
+
+/// Marks per figure.
+const MAX_MARKS: usize = 3000;
+
+/// The point of largest value of each run of consecutive points, so that at most
+/// [`MAX_MARKS`] remain and no peak is lost.
+fn chunk_max(pts: &[(f64, f64)]) -> Vec<(f64, f64)> {
+    let k = pts.len().div_ceil(MAX_MARKS).max(1);
+    pts.chunks(k)
+        .filter_map(|c| c.iter().copied().max_by(|a, b| a.1.total_cmp(&b.1)))
+        .collect()
+}
+
+/// Every k-th point, so that at most [`MAX_MARKS`] remain.
+fn every_kth(pts: &[(f64, f64)]) -> Vec<(f64, f64)> {
+    let k = pts.len().div_ceil(MAX_MARKS).max(1);
+    pts.iter().step_by(k).copied().collect()
 }
