@@ -429,7 +429,7 @@ pub fn calibrate_data(
                                 r.index, r.name
                             ),
                             None => format!(
-                                "  function {} ({}): the fitted map turns back inside the data's range",
+                                "  function {} ({}): the fitted map turns back inside the data's range or cannot be inverted up to the bending limit",
                                 r.index, r.name
                             ),
                         })

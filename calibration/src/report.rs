@@ -146,7 +146,7 @@ pub fn write_report(
         } else if !r.monotonic {
             let _ = writeln!(
                 md,
-                "| | the fitted map turns back inside the data's range: not selectable | | | | | | | |"
+                "| | the fitted map turns back inside the data's range or cannot be inverted up to the bending limit: not selectable | | | | | | | |"
             );
         }
     }

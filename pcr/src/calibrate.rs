@@ -185,7 +185,7 @@ fn print_summary(cal: &Calibration) {
             opt(r.test_rms_mm, 3),
             match (&r.error, r.monotonic) {
                 (Some(e), _) => format!("  failed: {e}"),
-                (None, false) => "  (the map turns back inside the data: not selectable)".into(),
+                (None, false) => "  (the map turns back inside the data or cannot reach the bending limit: not selectable)".into(),
                 _ => String::new(),
             }
         );
