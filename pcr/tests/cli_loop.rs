@@ -91,6 +91,33 @@ fn the_loop_extends_the_model_and_the_rerun_is_better() {
     let check = |s: &serde_json::Value| s["check_position_rms_mm"].as_f64().unwrap();
     assert!(check(&cal) < 0.3 * check(&nom));
     assert!(check(&ext) < 1.3 * check(&cal) + 0.05);
+    // The residual JSON: every effect with its parameters, their uncertainties and evidence;
+    // every candidate tried with its score; before and after.
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("residuals.json")).unwrap())
+            .unwrap();
+    for e in r["effects"].as_array().unwrap() {
+        let params = e["params"].as_array().unwrap();
+        let u = e["uncertainty"].as_object().unwrap();
+        assert_eq!(u.len(), params.len());
+        for p in params {
+            assert!(u[p["name"].as_str().unwrap()].as_f64().unwrap() > 0.0);
+        }
+        assert!(e["evidence"]["p_value"].as_f64().unwrap() < 0.01);
+    }
+    assert!(r["candidates"].as_array().unwrap().len() >= 9);
+    for k in [
+        "position_mean_mm",
+        "position_max_mm",
+        "position_rms_mm",
+        "orientation_rms_deg",
+    ] {
+        assert!(
+            r["before"][k].as_f64().unwrap() > r["after"][k].as_f64().unwrap(),
+            "{k}"
+        );
+    }
+    assert!(["explained", "partly_explained"].contains(&r["verdict"].as_str().unwrap()));
     // The extended robot file names what was added.
     let ext_toml = std::fs::read_to_string(dir.join("extended.toml")).unwrap();
     assert!(ext_toml.contains("[effects.backlash]"));

@@ -85,6 +85,9 @@ pub struct Added {
     pub description: String,
     /// Its parameters with uncertainties.
     pub params: Vec<Estimate>,
+    /// One standard error of each parameter, by name (the same as in `params`; `null` where
+    /// none could be estimated).
+    pub uncertainty: std::collections::BTreeMap<String, Option<f64>>,
     /// The evidence: the score that selected it.
     pub evidence: Score,
     /// Held-out errors once the full model includes it.
@@ -711,6 +714,7 @@ pub fn attribute(
                 name: name.to_string(),
                 description: candidates::describe(name).to_string(),
                 params: s.params.clone(),
+                uncertainty: s.params.iter().map(|p| (p.name.clone(), p.std)).collect(),
                 evidence: s.clone(),
                 held_out_after: Errors::of(&nctx, &ntest),
             });
@@ -728,6 +732,7 @@ pub fn attribute(
     // The values the final model holds (joint refinements move earlier effects too).
     for a in &mut added {
         a.params = current_params(&config, &a.name, &a.params);
+        a.uncertainty = a.params.iter().map(|p| (p.name.clone(), p.std)).collect();
     }
     // What remains: against the noise, and the features it follows.
     let noise = series.iter().find_map(|s| s.row_noise);
