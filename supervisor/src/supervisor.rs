@@ -15,7 +15,7 @@ use pcr_messages::{
 use pcr_nodes::{ChainNode, ProtocolGuard};
 use std::collections::VecDeque;
 use std::fs::File;
-use std::io::{BufRead, BufReader, BufWriter, Write};
+use std::io::{BufRead, BufReader, Write};
 use std::os::unix::net::{UnixListener, UnixStream};
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
@@ -105,7 +105,10 @@ struct Run {
     id: u32,
     name: String,
     path: PathBuf,
-    recorder: Recorder<BufWriter<File>>,
+    recorder: Recorder<File>,
+    /// Driver states waiting for the capture sample measured at their time (configurations
+    /// with a capture system), with when they arrived.
+    pending: VecDeque<(DriverStateMsg, Instant)>,
     acc: Accuracy,
     started: Instant,
     ended: Option<(Instant, &'static str)>,
@@ -537,8 +540,10 @@ impl Supervisor {
         let backend = backend.as_str();
         let created = stamp.to_string();
         let robot = self.robot_path.display().to_string();
+        // Unbuffered: every row is one write(2), flushed as it comes (a supervisor killed
+        // mid-run leaves every row it recorded, none torn).
         let recorder = Recorder::new(
-            BufWriter::new(f),
+            f,
             &[
                 ("robot", robot.as_str()),
                 ("source", backend),
@@ -559,6 +564,7 @@ impl Supervisor {
             name: name.into(),
             path: path.clone(),
             recorder,
+            pending: VecDeque::new(),
             acc: Accuracy::default(),
             started: Instant::now(),
             ended: None,
@@ -880,29 +886,19 @@ impl Supervisor {
                 self.mocap_at = Some(now);
             }
         }
-        // Driver states: record.
+        // Driver states: record (with a capture system, once the sample measured at the row's
+        // time has arrived: see `Capture::measured`).
         let mut stop = false;
-        let half_period = self.cfg.period_ms * 0.5e-3;
-        let stale_s = self.cfg.capture.as_ref().map_or(0.0, |c| c.stale_ms * 1e-3);
-        let capture = self.cfg.capture.is_some();
+        let capture = self.cfg.capture.as_ref().map(|c| CaptureMatch {
+            half_period_s: self.cfg.period_ms * 0.5e-3,
+            stale_s: c.stale_ms * 1e-3,
+            latency_s: c.latency_ms.unwrap_or(0.0) * 1e-3,
+        });
         while let Ok(Some(smp)) = self.sub_state.receive() {
             if let Some(run) = &mut self.run {
                 let st = smp.payload();
                 if st.run_id == run.id && !run_over(run, now) {
                     run.executed = Some(st.planned);
-                    let (row, measured) = if capture {
-                        measured_by_bridge(st, &self.mocap, half_period, stale_s)
-                    } else {
-                        (*st, Measured::of_state(st))
-                    };
-                    let _ = run.recorder.row_with(&row, &measured);
-                    run.acc.add(&row);
-                    if st.task_flags & task_flags::UNCORRECTED != 0 {
-                        run.uncorrected += 1;
-                    }
-                    if measured.pose.is_none() {
-                        run.unmeasured += 1;
-                    }
                     run.settled = st.flags & pcr_messages::driver_flags::MOVING == 0;
                     if st.flags & pcr_messages::driver_flags::FAULT != 0 && run.ended.is_none() {
                         run.ended = Some((now, "drive fault"));
@@ -913,8 +909,15 @@ impl Supervisor {
                         );
                         stop = true;
                     }
+                    match &capture {
+                        Some(_) => run.pending.push_back((*st, now)),
+                        None => run.record(st, Measured::of_state(st)),
+                    }
                 }
             }
+        }
+        if let (Some(run), Some(c)) = (&mut self.run, &capture) {
+            run.record_pending(&self.mocap, c, now, false);
         }
         if stop {
             let _ = self
@@ -1014,7 +1017,10 @@ impl Supervisor {
         if !over {
             return;
         }
-        let Some(run) = self.run.take() else { return };
+        let Some(mut run) = self.run.take() else {
+            return;
+        };
+        self.record_pending_now(&mut run);
         let how = run.ended.map_or("?", |e| e.1);
         let rows = run.recorder.rows();
         let _ = run.recorder.finish();
@@ -1075,6 +1081,18 @@ impl Supervisor {
         }
     }
 
+    /// Records every row still waiting for its capture sample (the run ends).
+    fn record_pending_now(&self, run: &mut Run) {
+        if let Some(c) = &self.cfg.capture {
+            let m = CaptureMatch {
+                half_period_s: self.cfg.period_ms * 0.5e-3,
+                stale_s: c.stale_ms * 1e-3,
+                latency_s: c.latency_ms.unwrap_or(0.0) * 1e-3,
+            };
+            run.record_pending(&self.mocap, &m, Instant::now(), true);
+        }
+    }
+
     /// Stops every child (SIGTERM, then SIGKILL after 3 s), cleans up dead nodes' resources and
     /// the control socket.
     fn shutdown(&mut self) {
@@ -1086,7 +1104,8 @@ impl Supervisor {
                 r.ended = Some((Instant::now(), "interrupted"));
             }
         }
-        if let Some(run) = self.run.take() {
+        if let Some(mut run) = self.run.take() {
+            self.record_pending_now(&mut run);
             let _ = run.recorder.finish();
         }
         // The driver goes last so that it holds while the others stop.
@@ -1125,19 +1144,47 @@ impl Supervisor {
     }
 }
 
-/// The measurement of a driver-state row taken from the bridge: the newest sample captured no
-/// later than half a period after the row and no older than the stale limit. Returns the row
-/// with that pose as its measured pose (for the accuracy) and the recording's measured cells.
+/// How driver-state rows are matched with the bridge's samples.
+struct CaptureMatch {
+    /// Half the chain's period, s.
+    half_period_s: f64,
+    /// Capture data older than this is not a measurement of the row, s.
+    stale_s: f64,
+    /// The capture system's declared latency (`[capture] latency_ms`), s.
+    latency_s: f64,
+}
+
+impl CaptureMatch {
+    /// The bridge sample measured at the row's time: the one whose capture time (its chain
+    /// time less the declared latency) is nearest the row's time, within half a period.
+    fn sample<'a>(
+        &self,
+        st: &DriverStateMsg,
+        ring: &'a VecDeque<MocapSample>,
+    ) -> Option<&'a MocapSample> {
+        ring.iter()
+            .map(|m| ((m.t_s - self.latency_s - st.t_s).abs(), m))
+            .filter(|(d, _)| *d <= self.half_period_s.min(self.stale_s))
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+            .map(|(_, m)| m)
+    }
+
+    /// Whether the match of a row is final: a sample captured at or after its time has
+    /// arrived (later ones are farther), or it has waited longer than the stale limit.
+    fn settled(&self, st: &DriverStateMsg, ring: &VecDeque<MocapSample>, waited: Duration) -> bool {
+        ring.back()
+            .is_some_and(|m| m.t_s - self.latency_s >= st.t_s)
+            || waited.as_secs_f64() > self.stale_s + self.latency_s
+    }
+}
+
+/// The measurement of a driver-state row taken from the bridge's sample `sample`. Returns the
+/// row with that pose as its measured pose (for the accuracy) and the recording's measured
+/// cells.
 fn measured_by_bridge(
     st: &DriverStateMsg,
-    ring: &VecDeque<MocapSample>,
-    half_period_s: f64,
-    stale_s: f64,
+    sample: Option<&MocapSample>,
 ) -> (DriverStateMsg, Measured) {
-    let sample = ring
-        .iter()
-        .rev()
-        .find(|m| m.t_s <= st.t_s + half_period_s && st.t_s - m.t_s <= stale_s);
     let mut row = *st;
     row.flags &= !driver_flags::POSE_VALID;
     let mut measured = Measured::default();
@@ -1150,6 +1197,46 @@ fn measured_by_bridge(
         measured.joints = std::array::from_fn(|i| m.joint(i).map(|j| [j[0], j[1]]));
     }
     (row, measured)
+}
+
+impl Run {
+    /// Records one row (and counts it in the accuracy).
+    fn record(&mut self, st: &DriverStateMsg, measured: Measured) {
+        let mut row = *st;
+        row.flags &= !driver_flags::POSE_VALID;
+        if let Some(p) = measured.pose {
+            row.measured = p;
+            row.flags |= driver_flags::POSE_VALID;
+        }
+        if let Err(e) = self.recorder.row_with(&row, &measured) {
+            tracing::error!("recording {}: {e}", self.path.display());
+        }
+        self.acc.add(&row);
+        if st.task_flags & task_flags::UNCORRECTED != 0 {
+            self.uncorrected += 1;
+        }
+        if measured.pose.is_none() {
+            self.unmeasured += 1;
+        }
+    }
+
+    /// Records the waiting rows whose capture sample is known (all of them with `all`).
+    fn record_pending(
+        &mut self,
+        ring: &VecDeque<MocapSample>,
+        c: &CaptureMatch,
+        now: Instant,
+        all: bool,
+    ) {
+        while let Some((st, at)) = self.pending.front().copied() {
+            if !all && !c.settled(&st, ring, now - at) {
+                break;
+            }
+            self.pending.pop_front();
+            let (_, measured) = measured_by_bridge(&st, c.sample(&st, ring));
+            self.record(&st, measured);
+        }
+    }
 }
 
 /// A run is over (and its recording closed) at least 300 ms after it ended, once the motors are

@@ -240,6 +240,94 @@ fn run_paper_prints_the_summary_and_exits_zero() {
     assert_eq!(chain.processes_left(), 0);
 }
 
+/// The run's recording (the only CSV of the chain's recording directory).
+fn recording_of(chain: &Chain) -> Option<PathBuf> {
+    std::fs::read_dir(chain.dir.path().join("rec"))
+        .ok()?
+        .flatten()
+        .map(|e| e.path())
+        .find(|p| p.extension().is_some_and(|x| x == "csv"))
+}
+
+/// Time of the last complete row of a recording being written (a line ending in a newline).
+fn last_row_time(path: &Path) -> Option<f64> {
+    let text = std::fs::read_to_string(path).ok()?;
+    let complete = &text[..text.rfind('\n')?];
+    complete.lines().last()?.split(',').next()?.parse().ok()
+}
+
+#[test]
+fn a_supervisor_killed_mid_run_leaves_every_row_it_recorded() {
+    let _g = lock();
+    let chain = Chain::new("sk", "heartbeat_timeout_ms = 2000.0", "");
+    let (mut sup, _out, err) = chain.supervisor(&["--run", "paper"]);
+    let mut e = Vec::new();
+    assert!(
+        wait_for(
+            &err,
+            "run 1 (paper) started",
+            Duration::from_secs(60),
+            &mut e
+        ),
+        "{e:?}"
+    );
+    let rec = recording_of(&chain).expect("the run's recording");
+    // Well into the run: the recording holds a few seconds of rows.
+    let end = Instant::now() + Duration::from_secs(30);
+    while last_row_time(&rec).unwrap_or(0.0) < 3.0 {
+        assert!(Instant::now() < end, "the recording does not grow");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let before = last_row_time(&rec).unwrap();
+    let read_at = Instant::now();
+    kill(sup.id() as i32, libc::SIGKILL);
+    let gap = read_at.elapsed().as_secs_f64();
+    let _ = sup.wait();
+    // The children stop (SIGTERM on their parent's death) and the drive holds.
+    assert!(
+        wait_for(
+            &err,
+            "the drive holds at steps",
+            Duration::from_secs(10),
+            &mut e
+        ),
+        "{e:?}"
+    );
+    let end = Instant::now() + Duration::from_secs(10);
+    while chain.processes_left() > 0 {
+        assert!(
+            Instant::now() < end,
+            "chain processes left after the supervisor died"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    // Every row parses, and the file ends within a cycle or two of the kill.
+    let r = pcr_recording::Recording::read_path(&rec)
+        .unwrap_or_else(|err| panic!("the killed run's recording does not read: {err}"));
+    let text = std::fs::read_to_string(&rec).unwrap();
+    assert!(
+        text.ends_with('\n'),
+        "torn last row: {:?}",
+        text.lines().last()
+    );
+    let last = r.rows.last().expect("rows").t_s;
+    assert!(
+        last >= before && last <= before + gap + 0.05,
+        "last row at {last} s; {before} s was on file {gap:.3} s before the kill"
+    );
+    assert!(r.rows.len() > 100, "{} rows", r.rows.len());
+    for (i, w) in r.rows.windows(2).enumerate() {
+        assert!(w[1].t_s > w[0].t_s, "row {i}: time goes back");
+    }
+    // The dead supervisor's iceoryx2 files: a later start cleans them; here, by hand.
+    for d in ["/dev/shm", "/tmp/iceoryx2"] {
+        for n in chain.leftovers() {
+            let p = Path::new(d).join(n);
+            let _ = std::fs::remove_file(&p).or_else(|_| std::fs::remove_dir_all(&p));
+        }
+    }
+}
+
 #[test]
 fn sigkill_mid_run_restarts_the_process_and_the_motion_resumes() {
     let _g = lock();

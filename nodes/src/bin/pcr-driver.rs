@@ -373,6 +373,22 @@ fn serve<D: Driver, P: PoseSensor>(
     })
     .map_err(|e| anyhow!("waitset: {e:?}"))?;
     pcr_nodes::log_end(kind, r);
+    if fatal.is_none() {
+        // Terminated (the supervisor stops the chain, or died: SIGTERM by PR_SET_PDEATHSIG):
+        // the last command to the drive holds the motors where they are.
+        let (t, period) = (chain_time_s(), c.period().as_secs_f64());
+        let held = step.driver_mut().read(t, period).and_then(|st| {
+            let cmd = pcr_driver::MotorCommand {
+                steps: st.steps,
+                enable: true,
+            };
+            step.driver_mut().write(t, period, &cmd).map(|()| st.steps)
+        });
+        match held {
+            Ok(steps) => eprintln!("pcr-driver: terminated; the drive holds at steps {steps:?}"),
+            Err(e) => eprintln!("pcr-driver: terminated; could not command the hold: {e}"),
+        }
+    }
     eprintln!("{}", stats.summary());
     match fatal {
         Some(e) => Err(e),
