@@ -9,9 +9,8 @@ use pcr_kinematics::workspace::{self, Workspace};
 use pcr_kinematics::{Pose, Robot};
 use pcr_robot::RobotConfig;
 
-fn load_robot(path: &str) -> Result<Robot> {
-    let cfg = RobotConfig::load(path)?;
-    Robot::new(&cfg).with_context(|| format!("robot {path}"))
+fn load_robot(path: &Option<String>) -> Result<Robot> {
+    crate::robot_arg::robot(path.as_deref())
 }
 
 fn spinner(what: &str) -> ProgressBar {
@@ -27,9 +26,10 @@ fn spinner(what: &str) -> ProgressBar {
 /// Arguments of `pcr ik`.
 #[derive(Args)]
 pub struct IkArgs {
-    /// Robot configuration (TOML).
-    #[arg(long, default_value = "configs/robot.toml")]
-    robot: String,
+    /// Robot configuration (TOML); default: configs/robot.toml if present, else the built-in
+    /// nominal robot.
+    #[arg(long)]
+    robot: Option<String>,
     /// Input CSV with columns x_mm, y_mm, phi_deg ("-" for standard input).
     #[arg(long)]
     input: String,
@@ -119,9 +119,10 @@ pub fn run_ik(a: IkArgs) -> Result<()> {
 /// Arguments of `pcr fk`.
 #[derive(Args)]
 pub struct FkArgs {
-    /// Robot configuration (TOML).
-    #[arg(long, default_value = "configs/robot.toml")]
-    robot: String,
+    /// Robot configuration (TOML); default: configs/robot.toml if present, else the built-in
+    /// nominal robot.
+    #[arg(long)]
+    robot: Option<String>,
     /// Input CSV with kappa1_per_mm, kappa2_per_mm, kappa3_per_mm, or q1, q2, q3 (motor steps).
     #[arg(long)]
     input: String,
@@ -215,9 +216,10 @@ pub fn run_fk(a: FkArgs) -> Result<()> {
 /// Arguments shared by `pcr workspace` and `pcr workspace sweep`.
 #[derive(Args)]
 pub struct WsCommon {
-    /// Robot configuration (TOML).
-    #[arg(long, default_value = "configs/robot.toml", global = true)]
-    robot: String,
+    /// Robot configuration (TOML); default: configs/robot.toml if present, else the built-in
+    /// nominal robot.
+    #[arg(long, global = true)]
+    robot: Option<String>,
     /// Platform orientation, degrees.
     #[arg(
         long = "phi-deg",
@@ -316,7 +318,7 @@ fn grid_ws(robot: &Robot, phi: f64, res: f64, msg: &str) -> Workspace {
 pub fn run_workspace(a: WorkspaceArgs) -> Result<()> {
     let c = &a.common;
     check_res(c.res)?;
-    let cfg = RobotConfig::load(&c.robot)?;
+    let (cfg, robot_name) = crate::robot_arg::load(c.robot.as_deref())?;
     if let Some(WsCmd::Sweep { r_base }) = &a.cmd {
         return run_sweep(&cfg, c, r_base);
     }
@@ -328,7 +330,7 @@ pub fn run_workspace(a: WorkspaceArgs) -> Result<()> {
         }
         None => cfg,
     };
-    let robot = Robot::new(&cfg).with_context(|| format!("robot {}", c.robot))?;
+    let robot = Robot::new(&cfg).with_context(|| format!("robot {robot_name}"))?;
     let phi = c.phi_deg.to_radians();
     let grid = (a.method != Method::Alpha).then(|| grid_ws(&robot, phi, c.res, "grid workspace"));
     let alpha = (a.method != Method::Grid)
@@ -337,7 +339,7 @@ pub fn run_workspace(a: WorkspaceArgs) -> Result<()> {
         .as_ref()
         .unwrap_or_else(|| &alpha.as_ref().expect("one method runs").workspace);
     let mut summary = serde_json::json!({
-        "robot": c.robot,
+        "robot": robot_name,
         "phi_deg": c.phi_deg,
         "res_mm": c.res,
         "r_base_mm": cfg.legs.iter().map(|l| l.r_base_mm).collect::<Vec<_>>(),

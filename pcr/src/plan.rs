@@ -35,8 +35,8 @@ pub struct Args {
     #[command(subcommand)]
     shape: Shape,
     /// Robot configuration (TOML).
-    #[arg(long, default_value = "configs/robot.toml", global = true)]
-    robot: String,
+    #[arg(long, global = true)]
+    robot: Option<String>,
     /// Output CSV (standard output if omitted).
     #[arg(long, global = true)]
     output: Option<String>,
@@ -411,8 +411,8 @@ struct Row {
 
 /// Runs `pcr plan`.
 pub fn run(a: Args) -> Result<()> {
-    let cfg = RobotConfig::load(&a.robot)?;
-    let robot = Robot::new(&cfg).with_context(|| format!("robot {}", a.robot))?;
+    let (cfg, robot_name) = crate::robot_arg::load(a.robot.as_deref())?;
+    let robot = Robot::new(&cfg).with_context(|| format!("robot {robot_name}"))?;
     let from = parse_pose(&a.from, "--from")?;
     if matches!(
         a.shape,

@@ -13,7 +13,6 @@ use pcr_mocap_bridge::{
     StreamRate,
 };
 use pcr_plant::{Plant, PlantConfig};
-use pcr_robot::RobotConfig;
 use std::io::Write;
 use std::time::{Duration, Instant};
 
@@ -76,9 +75,10 @@ enum QtmCommand {
     Register {
         #[command(flatten)]
         server: Server,
-        /// Robot configuration (its base points B_i).
-        #[arg(long, default_value = "configs/robot.toml")]
-        robot: String,
+        /// Robot configuration (its base points B_i); default: configs/robot.toml if present,
+        /// else the built-in nominal robot.
+        #[arg(long)]
+        robot: Option<String>,
         /// Frames averaged.
         #[arg(long, default_value_t = 100)]
         frames: usize,
@@ -101,9 +101,10 @@ enum QtmCommand {
         /// Port.
         #[arg(long, default_value_t = DEFAULT_PORT)]
         port: u16,
-        /// Robot configuration.
-        #[arg(long, default_value = "configs/robot.toml")]
-        robot: String,
+        /// Robot configuration; default: configs/robot.toml if present, else the built-in
+        /// nominal robot.
+        #[arg(long)]
+        robot: Option<String>,
         /// Plant configuration (default: the built-in prototype-like plant).
         #[arg(long)]
         plant: Option<String>,
@@ -150,7 +151,14 @@ pub fn run(a: Args) -> Result<()> {
             base_labels,
             max_residual_mm,
             out,
-        } => register(&server, &robot, frames, &base_labels, max_residual_mm, &out),
+        } => register(
+            &server,
+            robot.as_deref(),
+            frames,
+            &base_labels,
+            max_residual_mm,
+            &out,
+        ),
         QtmCommand::Serve {
             bind,
             port,
@@ -162,7 +170,7 @@ pub fn run(a: Args) -> Result<()> {
             truth,
         } => serve(
             &format!("{bind}:{port}"),
-            &robot,
+            robot.as_deref(),
             plant.as_deref(),
             ideal_capture,
             &motion,
@@ -297,13 +305,13 @@ fn stream(
 
 fn register(
     server: &Server,
-    robot: &str,
+    robot: Option<&str>,
     n: usize,
     base_labels: &str,
     max_residual_mm: f64,
     out: &str,
 ) -> Result<()> {
-    let rc = RobotConfig::load(robot).with_context(|| format!("robot {robot}"))?;
+    let (rc, robot) = crate::robot_arg::load(robot)?;
     let base: [[f64; 2]; 3] = std::array::from_fn(|i| rc.legs[i].base_point());
     let parts: Vec<&str> = base_labels.split(',').map(str::trim).collect();
     let [b1, b2, b3] = parts[..] else {
@@ -342,14 +350,14 @@ fn register(
 
 fn serve(
     bind: &str,
-    robot: &str,
+    robot: Option<&str>,
     plant: Option<&str>,
     ideal_capture: bool,
     motion: &str,
     seconds: Option<f64>,
     truth: Option<&str>,
 ) -> Result<()> {
-    let rc = RobotConfig::load(robot).with_context(|| format!("robot {robot}"))?;
+    let (rc, _) = crate::robot_arg::load(robot)?;
     let mut pc = match plant {
         Some(p) => PlantConfig::load(p).with_context(|| format!("plant {p}"))?,
         None => PlantConfig::prototype(),

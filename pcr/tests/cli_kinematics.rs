@@ -211,3 +211,32 @@ fn workspace_prints_the_area_last_and_writes_figures() {
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("--r-base"));
 }
+
+#[test]
+fn away_from_the_repository_the_tools_use_the_nominal_robot_and_say_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("poses.csv");
+    std::fs::write(&input, "x_mm,y_mm,phi_deg\n0,0,0\n").unwrap();
+    let run = |cwd: &std::path::Path, extra: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_pcr"))
+            .args(["ik", "--input", input.to_str().unwrap()])
+            .args(extra)
+            .current_dir(cwd)
+            .output()
+            .unwrap()
+    };
+    let away = run(dir.path(), &[]);
+    assert!(away.status.success(), "{away:?}");
+    let err = String::from_utf8_lossy(&away.stderr);
+    assert!(err.contains("built-in nominal robot"), "{err}");
+    // The nominal robot is configs/robot.toml: the same answer as in the repository.
+    let here = run(&repo(), &[]);
+    assert_eq!(away.stdout, here.stdout);
+    assert!(String::from_utf8_lossy(&here.stderr).contains("robot: configs/robot.toml"));
+    // A robot file that does not exist: one clear error, the OS message said once.
+    let missing = run(dir.path(), &["--robot", "nope.toml"]);
+    assert!(!missing.status.success());
+    let err = String::from_utf8_lossy(&missing.stderr);
+    assert!(err.contains("nope.toml"), "{err}");
+    assert_eq!(err.matches("os error 2").count(), 1, "{err}");
+}
