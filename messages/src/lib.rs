@@ -18,7 +18,7 @@
 use iceoryx2::prelude::ZeroCopySend;
 
 /// Version of the chain's protocol (message layouts and service names). Bump on any change.
-pub const PROTOCOL_VERSION: u32 = 3;
+pub const PROTOCOL_VERSION: u32 = 4;
 
 /// The unversioned service on which every process announces its protocol version.
 pub const PROTOCOL_SERVICE: &str = "pcr/protocol";
@@ -44,6 +44,8 @@ pub mod services {
     pub const COMMAND: &str = "command";
     /// Interpolator -> supervisor: [`crate::PlannerStatus`].
     pub const STATUS: &str = "status";
+    /// Interpolator -> supervisor: [`crate::Refusal`], why a command was refused.
+    pub const REFUSAL: &str = "refusal";
 }
 
 /// The full, versioned iceoryx2 service name of a base name: `pcr/v{PROTOCOL_VERSION}/{base}`.
@@ -586,6 +588,68 @@ pub struct PlannerStatus {
     pub reserved: u32,
 }
 
+/// Bytes of a [`Refusal`]'s reason.
+pub const REFUSAL_TEXT_LEN: usize = 240;
+
+/// Interpolator -> supervisor: why the command of run `run_id` was refused (UTF-8 text, cut at
+/// a character boundary to [`REFUSAL_TEXT_LEN`] bytes), sent once when it is refused.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("pcr::v1::Refusal")]
+pub struct Refusal {
+    /// Chain time of the refusal, s.
+    pub t_s: f64,
+    /// Run id of the refused command.
+    pub run_id: u32,
+    /// [`PROTOCOL_VERSION`].
+    pub version: u32,
+    /// Bytes of `text` used.
+    pub len: u32,
+    /// Reserved, 0.
+    pub reserved: u32,
+    /// The reason, UTF-8.
+    pub text: [u8; REFUSAL_TEXT_LEN],
+}
+
+impl Default for Refusal {
+    fn default() -> Self {
+        Refusal {
+            t_s: 0.0,
+            run_id: 0,
+            version: PROTOCOL_VERSION,
+            len: 0,
+            reserved: 0,
+            text: [0; REFUSAL_TEXT_LEN],
+        }
+    }
+}
+
+impl Refusal {
+    /// The refusal of run `run_id` for `reason` (cut at a character boundary if too long).
+    pub fn new(t_s: f64, run_id: u32, reason: &str) -> Refusal {
+        let mut n = reason.len().min(REFUSAL_TEXT_LEN);
+        while !reason.is_char_boundary(n) {
+            n -= 1;
+        }
+        let mut r = Refusal {
+            t_s,
+            run_id,
+            len: n as u32,
+            ..Refusal::default()
+        };
+        r.text[..n].copy_from_slice(&reason.as_bytes()[..n]);
+        r
+    }
+
+    /// The reason (empty if the bytes are not valid UTF-8 or the length is out of range).
+    pub fn reason(&self) -> &str {
+        self.text
+            .get(..self.len as usize)
+            .and_then(|b| std::str::from_utf8(b).ok())
+            .unwrap_or("")
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -600,6 +664,16 @@ mod tests {
             service_name_for(PROTOCOL_VERSION + 1, services::TASK_SETPOINT),
             service_name(services::TASK_SETPOINT)
         );
+    }
+
+    #[test]
+    fn a_refusal_carries_its_reason_cut_at_a_character_boundary() {
+        let r = Refusal::new(1.0, 7, "leg 1: pose unreachable");
+        assert_eq!((r.run_id, r.reason()), (7, "leg 1: pose unreachable"));
+        let long = "\u{e9}".repeat(REFUSAL_TEXT_LEN);
+        let r = Refusal::new(0.0, 1, &long);
+        assert!(r.reason().len() <= REFUSAL_TEXT_LEN && !r.reason().is_empty());
+        assert!(r.reason().chars().all(|c| c == '\u{e9}'));
     }
 
     #[test]

@@ -25,6 +25,9 @@ pub enum Request {
     RunMoves(Vec<Move>),
     /// Run a program file (TOML; the path as the supervisor sees it).
     RunProgram(PathBuf),
+    /// The planner's verdict on run N: `planning`, `running`, `refused: <reason>`, or how it
+    /// ended (`ctl run` waits for it).
+    Verdict(u32),
     /// Pause the motion.
     Pause,
     /// Resume it.
@@ -96,6 +99,11 @@ pub fn parse(line: &str) -> Result<Request, String> {
         "stop" => Request::Stop,
         "reset" => Request::Reset,
         "shutdown" => Request::Shutdown,
+        "verdict" => Request::Verdict(
+            rest.trim()
+                .parse()
+                .map_err(|_| format!("verdict needs a run number, got {rest:?}"))?,
+        ),
         "run" => {
             let rest = rest.trim();
             match rest.split_once(' ') {
@@ -115,6 +123,13 @@ pub fn parse(line: &str) -> Result<Request, String> {
         }
         o => return Err(format!("unknown command {o:?}")),
     })
+}
+
+/// The run number of a `run` request's reply (`run N (name) started; ...`).
+pub fn started_run(reply: &str) -> Option<u32> {
+    let rest = reply.strip_prefix("run ")?;
+    let (n, tail) = rest.split_once(' ')?;
+    tail.contains("started").then(|| n.parse().ok()).flatten()
 }
 
 /// Sends one request and returns the reply (client side).
@@ -138,6 +153,13 @@ mod tests {
     #[test]
     fn parses_requests() {
         assert_eq!(parse("status").unwrap(), Request::Status);
+        assert_eq!(parse("verdict 12").unwrap(), Request::Verdict(12));
+        assert!(parse("verdict x").is_err());
+        assert_eq!(
+            started_run("run 3 (moves) started; recording out/x.csv\n"),
+            Some(3)
+        );
+        assert_eq!(started_run("error: a run is in progress"), None);
         assert_eq!(
             parse("run paper").unwrap(),
             Request::RunBuiltin("paper".into())

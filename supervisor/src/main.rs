@@ -67,9 +67,12 @@ fn main() -> ExitCode {
             Ok(reply) => {
                 print!("{reply}");
                 if reply.starts_with("error") {
-                    ExitCode::FAILURE
-                } else {
-                    ExitCode::SUCCESS
+                    return ExitCode::FAILURE;
+                }
+                match ctl::started_run(&reply) {
+                    // `run`: wait for the planner's verdict; a refusal fails with its reason.
+                    Some(n) => wait_verdict(&cfg.socket_path(), n),
+                    None => ExitCode::SUCCESS,
                 }
             }
             Err(e) => {
@@ -108,5 +111,33 @@ fn main() -> ExitCode {
             eprintln!("pcr-supervisor: error: {e:#}");
             ExitCode::FAILURE
         }
+    }
+}
+
+/// Waits (at most 2 minutes) until the planner has planned run `n` or refused it; prints the
+/// verdict and fails on a refusal.
+fn wait_verdict(socket: &std::path::Path, n: u32) -> ExitCode {
+    let end = std::time::Instant::now() + std::time::Duration::from_secs(120);
+    loop {
+        let v = match ctl::request(socket, &format!("verdict {n}")) {
+            Ok(v) => v.trim().to_string(),
+            Err(e) => {
+                eprintln!("pcr-supervisor ctl: run {n}: lost the supervisor: {e}");
+                return ExitCode::FAILURE;
+            }
+        };
+        if v != "planning" {
+            println!("run {n}: {v}");
+            return if v.starts_with("refused") || v.starts_with("error") {
+                ExitCode::FAILURE
+            } else {
+                ExitCode::SUCCESS
+            };
+        }
+        if std::time::Instant::now() > end {
+            println!("run {n}: still planning after 2 minutes (see `ctl status`)");
+            return ExitCode::SUCCESS;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
     }
 }

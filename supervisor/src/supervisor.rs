@@ -10,7 +10,7 @@ use iceoryx2::prelude::*;
 use pcr_control::{command_of_moves, simple_command, Accuracy, Measured, Recorder};
 use pcr_messages::{
     command_kind, driver_flags, planner_state, program_id, services as s, task_flags, Command,
-    DriverStateMsg, Heartbeat, MocapSample, NodeKind, PlannerStatus, PROTOCOL_VERSION,
+    DriverStateMsg, Heartbeat, MocapSample, NodeKind, PlannerStatus, Refusal, PROTOCOL_VERSION,
 };
 use pcr_nodes::{ChainNode, ProtocolGuard};
 use std::collections::VecDeque;
@@ -131,6 +131,38 @@ struct Run {
     uncorrected: u64,
     /// Rows without a measured pose.
     unmeasured: u64,
+    /// The planner's state for this run (`None` before its first status).
+    planner_state: Option<u32>,
+    /// Why the planner refused a command of this run (its newest refusal).
+    refusal: Option<String>,
+}
+
+impl Run {
+    /// What the planner made of the run: `planning`, `running`, `paused`, `refused: <reason>`
+    /// or how it ended.
+    fn verdict(&self) -> String {
+        match (self.ended, self.planner_state) {
+            (Some((_, "refused")), _) => format!(
+                "refused: {}",
+                self.refusal.as_deref().unwrap_or("(no reason received)")
+            ),
+            (Some((_, how)), _) => how.to_string(),
+            (None, None | Some(planner_state::PLANNING)) if self.recover.is_none() => {
+                "planning".into()
+            }
+            (None, _) if self.user_paused || self.paused_by_supervisor => "paused".into(),
+            (None, _) => "running".into(),
+        }
+    }
+
+    /// The accuracy line's text: none over no measured row.
+    fn accuracy_text(&self) -> String {
+        if self.acc.n == 0 {
+            "accuracy: no measured rows".into()
+        } else {
+            format!("accuracy over {}", self.acc)
+        }
+    }
 }
 
 /// Samples of the motion-capture bridge kept for matching driver-state rows.
@@ -148,6 +180,9 @@ pub struct Supervisor {
     sub_hb: Subscriber<ipc::Service, Heartbeat, ()>,
     sub_state: Subscriber<ipc::Service, DriverStateMsg, ()>,
     sub_status: Subscriber<ipc::Service, PlannerStatus, ()>,
+    sub_refusal: Subscriber<ipc::Service, Refusal, ()>,
+    /// The verdict of the last finished run (`verdict N` after the run is over).
+    last_verdict: Option<(u32, String)>,
     /// The bridge's samples (configurations with a capture system).
     sub_mocap: Option<Subscriber<ipc::Service, MocapSample, ()>>,
     /// The newest bridge samples, oldest first.
@@ -203,6 +238,7 @@ impl Supervisor {
         let sub_hb = node.subscriber::<Heartbeat>(s::HEARTBEAT)?;
         let sub_state = node.subscriber::<DriverStateMsg>(s::DRIVER_STATE)?;
         let sub_status = node.subscriber::<PlannerStatus>(s::STATUS)?;
+        let sub_refusal = node.subscriber::<Refusal>(s::REFUSAL)?;
         let sub_mocap = match &cfg.capture {
             Some(_) => Some(node.subscriber::<MocapSample>(s::MOCAP)?),
             None => None,
@@ -274,6 +310,8 @@ impl Supervisor {
             sub_hb,
             sub_state,
             sub_status,
+            sub_refusal,
+            last_verdict: None,
             sub_mocap,
             mocap: VecDeque::with_capacity(MOCAP_RING),
             mocap_at: None,
@@ -579,6 +617,8 @@ impl Supervisor {
             recover: None,
             uncorrected: 0,
             unmeasured: 0,
+            planner_state: None,
+            refusal: None,
         });
         Ok(format!(
             "run {id} ({name}) started; recording {}",
@@ -647,6 +687,11 @@ impl Supervisor {
                 }
                 "reset: safe stop cleared, failed processes restart".into()
             }
+            Request::Verdict(n) => match (&self.run, &self.last_verdict) {
+                (Some(r), _) if r.id == n => r.verdict(),
+                (_, Some((id, v))) if *id == n => v.clone(),
+                _ => format!("error: no run {n}"),
+            },
             Request::Shutdown => {
                 self.exit = Some(0);
                 "shutting down".into()
@@ -668,21 +713,14 @@ impl Supervisor {
         ));
         match &self.run {
             Some(r) => out.push_str(&format!(
-                "run {} ({}): {}; progress {:.1}/{:.1} s; recorded rows {}; accuracy over {}\n",
+                "run {} ({}): {}; progress {:.1}/{:.1} s; recorded rows {}; {}\n",
                 r.id,
                 r.name,
-                r.ended.map_or(
-                    if r.user_paused || r.paused_by_supervisor {
-                        "paused"
-                    } else {
-                        "running"
-                    },
-                    |e| e.1
-                ),
+                r.verdict(),
                 r.progress_s,
                 r.duration_s,
                 r.recorder.rows(),
-                r.acc
+                r.accuracy_text()
             )),
             None => out.push_str("run: none\n"),
         }
@@ -924,11 +962,27 @@ impl Supervisor {
                 .pub_cmd
                 .send_copy(simple_command(command_kind::STOP, 0, 0));
         }
+        // Refusals (before the status that reports the run refused).
+        while let Ok(Some(smp)) = self.sub_refusal.receive() {
+            let r = smp.payload();
+            let why = r.reason().to_string();
+            match &mut self.run {
+                Some(run) if run.id == r.run_id => {
+                    eprintln!("pcr-supervisor: run {}: the planner refused: {why}", run.id);
+                    run.refusal = Some(why);
+                }
+                _ => eprintln!(
+                    "pcr-supervisor: the planner refused a command (run {}): {why}",
+                    r.run_id
+                ),
+            }
+        }
         // Planner status.
         while let Ok(Some(smp)) = self.sub_status.receive() {
             let st = *smp.payload();
             if let Some(run) = &mut self.run {
                 if st.run_id == run.id {
+                    run.planner_state = Some(st.state);
                     run.progress_s = st.progress_s;
                     run.duration_s = st.duration_s;
                     if matches!(st.state, planner_state::RUNNING | planner_state::PAUSED) {
@@ -1023,16 +1077,19 @@ impl Supervisor {
         self.record_pending_now(&mut run);
         let how = run.ended.map_or("?", |e| e.1);
         let rows = run.recorder.rows();
+        let verdict = run.verdict();
+        let accuracy = run.accuracy_text();
         let _ = run.recorder.finish();
-        println!("run {} ({}): {how}", run.id, run.name);
+        println!("run {} ({}): {verdict}", run.id, run.name);
         self.last_summary = Some(format!(
-            "{} ({}): {how}; {} rows in {}; {}",
+            "{} ({}): {verdict}; {} rows in {}; {}",
             run.id,
             run.name,
             rows,
             run.path.display(),
-            run.acc
+            accuracy
         ));
+        self.last_verdict = Some((run.id, verdict));
         println!("recording: {} ({rows} rows)", run.path.display());
         if run.acc.n > 0 {
             match crate::figure::run_figure(&run.path) {

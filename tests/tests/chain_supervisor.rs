@@ -93,6 +93,16 @@ name = "mocap"
         }
     }
 
+    fn ctl_output(&self, words: &str) -> std::process::Output {
+        Command::new(bin_dir().join("pcr-supervisor"))
+            .arg("--config")
+            .arg(&self.config)
+            .arg("ctl")
+            .args(words.split(' '))
+            .output()
+            .unwrap()
+    }
+
     fn ctl(&self, words: &str) -> String {
         let o = Command::new(bin_dir().join("pcr-supervisor"))
             .arg("--config")
@@ -666,6 +676,29 @@ fn ctl_runs_a_list_of_moves_with_pause_and_resume() {
     );
     let st = chain.ctl("status");
     assert!(st.contains("last run: 1 (moves): done"), "{st}");
+    // A refused program: `ctl run` waits for the planner's verdict, prints the reason and
+    // fails; the status keeps the reason and reports no accuracy over no measured row.
+    let o = chain.ctl_output("run moves line 500 0 0 30");
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(!o.status.success(), "{text}");
+    assert!(
+        text.contains("run 2: refused: ") && text.contains("unreachable"),
+        "{text}"
+    );
+    let end = Instant::now() + Duration::from_secs(10);
+    let st = loop {
+        let st = chain.ctl("status");
+        if st.contains("last run: 2") || Instant::now() > end {
+            break st;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    assert!(st.contains("last run: 2 (moves): refused: "), "{st}");
+    assert!(
+        st.contains("unreachable") && st.contains("accuracy: no measured rows"),
+        "{st}"
+    );
+    assert!(chain.ctl("verdict 2").contains("refused: "));
     assert!(chain.ctl("bogus").starts_with("error"));
     assert!(chain.ctl("shutdown").contains("shutting down"));
     let st = wait_exit(&mut sup, Duration::from_secs(30));

@@ -17,7 +17,7 @@ use pcr_control::{
 use pcr_kinematics::{Pose, Robot};
 use pcr_messages::{
     command_kind, driver_flags, monotonic_ns, planner_state, services as s, Command, Correction,
-    DriverStateMsg, Heartbeat, NodeKind, PlannerStatus, TaskSetpoint,
+    DriverStateMsg, Heartbeat, NodeKind, PlannerStatus, Refusal, TaskSetpoint,
 };
 use pcr_nodes::{chain_time_s, ports::latest, CommonArgs, CycleStats, PeriodicTimer};
 use pcr_robot::RobotConfig;
@@ -107,6 +107,12 @@ fn run(a: Args) -> Result<()> {
     let pub_sp = cn.publisher::<TaskSetpoint>(s::TASK_SETPOINT)?;
     let notify = cn.notifier(s::TASK_SETPOINT)?;
     let pub_status = cn.publisher::<PlannerStatus>(s::STATUS)?;
+    let pub_refusal = cn.publisher::<Refusal>(s::REFUSAL)?;
+    // Whoever asked learns why a command was refused (the supervisor, `ctl run`).
+    let refuse = |run_id: u32, why: &dyn std::fmt::Display| {
+        tracing::error!(run_id, "command refused: {why}");
+        let _ = pub_refusal.send_copy(Refusal::new(chain_time_s(), run_id, &why.to_string()));
+    };
     let pub_hb = cn.publisher::<Heartbeat>(s::HEARTBEAT)?;
     let sub_cmd = cn.subscriber::<Command>(s::COMMAND)?;
     let sub_corr = cn.subscriber::<Correction>(s::CORRECTION)?;
@@ -187,7 +193,7 @@ fn run(a: Args) -> Result<()> {
                     cancelled = None;
                 } else if let Err(e) = r {
                     interp.refuse(run_id);
-                    tracing::error!(run_id, "command refused: {e}");
+                    refuse(run_id, &e);
                 }
             }
             while let Ok(Some(cmd)) = sub_cmd.receive() {
@@ -199,7 +205,7 @@ fn run(a: Args) -> Result<()> {
                         .err()
                         .or(planning.map(CommandError::Busy));
                     if let Some(e) = busy {
-                        tracing::error!(run_id = cmd.run_id, "command refused: {e}");
+                        refuse(cmd.run_id, &e);
                         continue;
                     }
                     commanded = true;
@@ -208,7 +214,7 @@ fn run(a: Args) -> Result<()> {
                         tracing::info!(run_id = cmd.run_id, "planning a program");
                     } else {
                         interp.refuse(cmd.run_id);
-                        tracing::error!("the planning thread is gone: command refused");
+                        refuse(cmd.run_id, &"the planning thread is gone");
                     }
                     continue;
                 }
@@ -229,7 +235,7 @@ fn run(a: Args) -> Result<()> {
                             auto_paused = false;
                         }
                     }
-                    Err(e) => tracing::error!("command refused: {e}"),
+                    Err(e) => refuse(cmd.run_id, &e),
                 }
             }
             if let Ok(Some(corr)) = latest(&sub_corr) {
