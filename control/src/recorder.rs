@@ -163,13 +163,14 @@ mod tests {
     use super::*;
 
     fn state(t: f64, q: [i32; 3]) -> DriverStateMsg {
-        let mut s = DriverStateMsg::default();
-        s.t_s = t;
-        s.commanded = q;
-        s.planned = [1.5, -2.25, 0.1];
-        s.measured = [1.0, 2.0, 0.0];
-        s.flags = driver_flags::POSE_VALID;
-        s
+        DriverStateMsg {
+            t_s: t,
+            commanded: q,
+            planned: [1.5, -2.25, 0.1],
+            measured: [1.0, 2.0, 0.0],
+            flags: driver_flags::POSE_VALID,
+            ..Default::default()
+        }
     }
 
     #[test]
