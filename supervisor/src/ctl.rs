@@ -25,6 +25,14 @@ pub enum Request {
     RunMoves(Vec<Move>),
     /// Run a program file (TOML; the path as the supervisor sees it).
     RunProgram(PathBuf),
+    /// Run one of the paper's experiments (`crate::experiment`): its kind and `key=value`
+    /// options.
+    RunExperiment {
+        /// calibration, repeatability, paths or backlash.
+        kind: String,
+        /// The options, in order.
+        options: Vec<(String, String)>,
+    },
     /// The planner's verdict on run N: `planning`, `running`, `refused: <reason>`, or how it
     /// ended (`ctl run` waits for it).
     Verdict(u32),
@@ -108,6 +116,18 @@ pub fn parse(line: &str) -> Result<Request, String> {
             let rest = rest.trim();
             match rest.split_once(' ') {
                 Some(("moves", m)) => Request::RunMoves(parse_moves(m)?),
+                Some(("experiment", e)) => {
+                    let mut words = e.split_whitespace();
+                    let kind = words.next().unwrap_or_default().to_string();
+                    let options = words
+                        .map(|w| {
+                            w.split_once('=')
+                                .map(|(k, v)| (k.to_string(), v.to_string()))
+                                .ok_or_else(|| format!("experiment option {w:?}: write key=value"))
+                        })
+                        .collect::<Result<_, _>>()?;
+                    Request::RunExperiment { kind, options }
+                }
                 Some(("program", f)) if !f.trim().is_empty() => {
                     Request::RunProgram(PathBuf::from(f.trim()))
                 }
@@ -116,7 +136,8 @@ pub fn parse(line: &str) -> Result<Request, String> {
                 }
                 _ => {
                     return Err(format!(
-                        "run what? {rest:?} (paper, circle, square, moves ..., program <file>)"
+                        "run what? {rest:?} (paper, circle, square, moves ..., program <file>, \
+                         experiment <kind> [key=value ...])"
                     ))
                 }
             }
@@ -154,6 +175,17 @@ mod tests {
     fn parses_requests() {
         assert_eq!(parse("status").unwrap(), Request::Status);
         assert_eq!(parse("verdict 12").unwrap(), Request::Verdict(12));
+        assert_eq!(
+            parse("run experiment calibration points=3 phis-deg=0,10").unwrap(),
+            Request::RunExperiment {
+                kind: "calibration".into(),
+                options: vec![
+                    ("points".into(), "3".into()),
+                    ("phis-deg".into(), "0,10".into())
+                ]
+            }
+        );
+        assert!(parse("run experiment calibration points").is_err());
         assert!(parse("verdict x").is_err());
         assert_eq!(
             started_run("run 3 (moves) started; recording out/x.csv\n"),

@@ -4,6 +4,7 @@
 
 pub mod config;
 pub mod ctl;
+pub mod experiment;
 pub mod figure;
 pub mod supervisor;
 

@@ -3,6 +3,7 @@
 
 use crate::config::{Backend, ProcessConfig, ProcessName, SupervisorConfig};
 use crate::ctl::{self, Request};
+use crate::experiment::Experiment;
 use anyhow::{anyhow, Context, Result};
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
@@ -135,7 +136,35 @@ struct Run {
     planner_state: Option<u32>,
     /// Why the planner refused a command of this run (its newest refusal).
     refusal: Option<String>,
+    /// An experiment's further commands and its row annotator (`ctl run experiment`).
+    experiment: Option<LiveExperiment>,
 }
+
+/// An experiment running live: its commands are sent one after the other as each is done.
+struct LiveExperiment {
+    /// The chain commands (run id set), in order.
+    commands: Vec<Command>,
+    /// What each command covers, for messages.
+    labels: Vec<String>,
+    /// The command to send next.
+    next: usize,
+    /// A command was sent and the planner has not yet reported it planning or running (its
+    /// status may still say DONE for the previous one).
+    awaiting_start: bool,
+    /// Labels the rows (pose_id, rep, settled, set, segment ...).
+    annotator: pcr_experiments::Annotator,
+}
+
+/// The columns an experiment's recording carries after the standard ones.
+const EXPERIMENT_COLUMNS: [&str; 7] = [
+    "pose_id",
+    "rep",
+    "settled",
+    "set",
+    "segment",
+    "motor",
+    "amplitude_steps",
+];
 
 impl Run {
     /// What the planner made of the run: `planning`, `running`, `paused`, `refused: <reason>`
@@ -168,6 +197,13 @@ impl Run {
 /// Samples of the motion-capture bridge kept for matching driver-state rows.
 const MOCAP_RING: usize = 32;
 
+/// An experiment being designed: its run id, name and the design thread's answer.
+type Preparing = (
+    u32,
+    String,
+    std::sync::mpsc::Receiver<Result<Experiment, String>>,
+);
+
 /// The supervisor.
 pub struct Supervisor {
     cfg: SupervisorConfig,
@@ -195,6 +231,9 @@ pub struct Supervisor {
     socket_path: PathBuf,
     run: Option<Run>,
     next_run_id: u32,
+    /// An experiment being designed off the loop (`ctl run experiment`): its run id, name and
+    /// the worker's answer.
+    preparing: Option<Preparing>,
     safe_stop: Option<String>,
     exit: Option<i32>,
     requested_run_started: bool,
@@ -320,6 +359,7 @@ impl Supervisor {
             socket_path,
             run: None,
             next_run_id: 1,
+            preparing: None,
             safe_stop: None,
             exit: None,
             requested_run_started: false,
@@ -541,6 +581,104 @@ impl Supervisor {
     }
 
     fn start_run(&mut self, name: &str, cmd: Result<Command, String>) -> Result<String, String> {
+        if self.preparing.is_some() {
+            return Err("a run is in progress; `stop` it first".into());
+        }
+        self.start_run_with(None, name, cmd, None)
+    }
+
+    /// Starts designing one of the paper's experiments (`ctl run experiment`) on a worker
+    /// thread (the full calibration set takes about a second); the run starts when it is ready
+    /// ([`Self::start_prepared`]). Its run number is given now.
+    fn start_experiment(
+        &mut self,
+        kind: &str,
+        options: &[(String, String)],
+    ) -> Result<String, String> {
+        if let Some(why) = &self.safe_stop {
+            return Err(format!("safe stop ({why}); send `reset` first"));
+        }
+        if self.preparing.is_some() || self.run.as_ref().is_some_and(|r| r.ended.is_none()) {
+            return Err("a run is in progress; `stop` it first".into());
+        }
+        if !self.all_healthy() {
+            return Err("not all processes are up yet".into());
+        }
+        let robot = pcr_robot::RobotConfig::load(&self.robot_path)
+            .map_err(|e| format!("robot {}: {e}", self.robot_path.display()))?;
+        let spec = crate::experiment::spec(kind, options)?;
+        let name = format!("experiment-{kind}");
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::Builder::new()
+            .name("experiment design".into())
+            .spawn(move || {
+                let _ = tx.send(spec.build(&robot));
+            })
+            .map_err(|e| format!("cannot start the design thread: {e}"))?;
+        let id = self.next_run_id;
+        self.next_run_id += 1;
+        self.preparing = Some((id, name.clone(), rx));
+        Ok(format!(
+            "run {id} ({name}) started; designing the experiment"
+        ))
+    }
+
+    /// Starts the experiment whose design is ready (or reports why it could not be made).
+    fn start_prepared(&mut self) {
+        let Some((id, name, rx)) = &self.preparing else {
+            return;
+        };
+        let (id, name) = (*id, name.clone());
+        let e = match rx.try_recv() {
+            Err(std::sync::mpsc::TryRecvError::Empty) => return,
+            Err(std::sync::mpsc::TryRecvError::Disconnected) => {
+                Err("the design thread ended without a design".to_string())
+            }
+            Ok(e) => e,
+        };
+        self.preparing = None;
+        let started = e.and_then(|e| {
+            let mut commands = Vec::with_capacity(e.commands.len());
+            for (i, c) in e.commands.iter().enumerate() {
+                commands.push(command_of_moves(id, &c.moves).map_err(|err| {
+                    format!("{name}: command {} ({}): {err}", i + 1, c.describe())
+                })?);
+            }
+            let first = *commands.first().ok_or(format!("{name}: no command"))?;
+            let live = LiveExperiment {
+                labels: e.commands.iter().map(|c| c.describe()).collect(),
+                commands,
+                next: 1,
+                awaiting_start: false,
+                annotator: pcr_experiments::Annotator::new(
+                    &e.design,
+                    pcr_experiments::Tolerances::default(),
+                ),
+            };
+            let mut meta = e.design.metadata(e.seed);
+            meta.push(("commands".into(), live.commands.len().to_string()));
+            meta.push((
+                "period_s".into(),
+                pcr_recording::number(self.cfg.period_ms * 1e-3),
+            ));
+            self.start_run_with(Some(id), &name, Ok(first), Some((live, meta)))
+        });
+        match started {
+            Ok(msg) => eprintln!("pcr-supervisor: {msg}"),
+            Err(e) => {
+                eprintln!("pcr-supervisor: run {id} ({name}) refused: {e}");
+                self.last_verdict = Some((id, format!("refused: {e}")));
+            }
+        }
+    }
+
+    fn start_run_with(
+        &mut self,
+        id: Option<u32>,
+        name: &str,
+        cmd: Result<Command, String>,
+        experiment: Option<(LiveExperiment, Vec<(String, String)>)>,
+    ) -> Result<String, String> {
         if let Some(why) = &self.safe_stop {
             return Err(format!("safe stop ({why}); send `reset` first"));
         }
@@ -551,8 +689,10 @@ impl Supervisor {
             return Err("not all processes are up yet".into());
         }
         let mut cmd = cmd?;
-        let id = self.next_run_id;
-        self.next_run_id += 1;
+        let id = id.unwrap_or_else(|| {
+            self.next_run_id += 1;
+            self.next_run_id - 1
+        });
         cmd.run_id = id;
         let dir = PathBuf::from(&self.cfg.recording_dir);
         std::fs::create_dir_all(&dir).map_err(|e| format!("recording dir {dir:?}: {e}"))?;
@@ -580,16 +720,30 @@ impl Supervisor {
         let robot = self.robot_path.display().to_string();
         // Unbuffered: every row is one write(2), flushed as it comes (a supervisor killed
         // mid-run leaves every row it recorded, none torn).
-        let recorder = Recorder::new(
-            f,
-            &[
-                ("robot", robot.as_str()),
-                ("source", backend),
-                ("created", created.as_str()),
-                ("program", name),
-            ],
-        )
-        .map_err(|e| format!("recording: {e}"))?;
+        let mut meta: Vec<(&str, &str)> = vec![
+            ("robot", robot.as_str()),
+            ("source", backend),
+            ("created", created.as_str()),
+            ("program", name),
+        ];
+        let (experiment, extra_meta) = match experiment {
+            Some((x, m)) => (Some(x), m),
+            None => (None, Vec::new()),
+        };
+        meta.extend(extra_meta.iter().map(|(k, v)| (k.as_str(), v.as_str())));
+        let columns: &[&str] = if experiment.is_some() {
+            &EXPERIMENT_COLUMNS
+        } else {
+            &[]
+        };
+        let recorder =
+            Recorder::with_extra(f, &meta, columns).map_err(|e| format!("recording: {e}"))?;
+        let experiment = experiment.map(|mut x| {
+            for c in &mut x.commands {
+                c.run_id = id;
+            }
+            x
+        });
         self.pub_cmd
             .send_copy(cmd)
             .map_err(|e| format!("command: {e:?}"))?;
@@ -619,6 +773,7 @@ impl Supervisor {
             unmeasured: 0,
             planner_state: None,
             refusal: None,
+            experiment,
         });
         Ok(format!(
             "run {id} ({name}) started; recording {}",
@@ -687,6 +842,12 @@ impl Supervisor {
                 }
                 "reset: safe stop cleared, failed processes restart".into()
             }
+            Request::RunExperiment { kind, options } => self
+                .start_experiment(&kind, &options)
+                .unwrap_or_else(|e| format!("error: {e}")),
+            Request::Verdict(n) if self.preparing.as_ref().is_some_and(|p| p.0 == n) => {
+                "planning".into()
+            }
             Request::Verdict(n) => match (&self.run, &self.last_verdict) {
                 (Some(r), _) if r.id == n => r.verdict(),
                 (_, Some((id, v))) if *id == n => v.clone(),
@@ -713,10 +874,15 @@ impl Supervisor {
         ));
         match &self.run {
             Some(r) => out.push_str(&format!(
-                "run {} ({}): {}; progress {:.1}/{:.1} s; recorded rows {}; {}\n",
+                "run {} ({}): {}{}; progress {:.1}/{:.1} s; recorded rows {}; {}\n",
                 r.id,
                 r.name,
                 r.verdict(),
+                r.experiment.as_ref().map_or(String::new(), |x| format!(
+                    "; command {}/{}",
+                    x.next,
+                    x.commands.len()
+                )),
                 r.progress_s,
                 r.duration_s,
                 r.recorder.rows(),
@@ -983,6 +1149,16 @@ impl Supervisor {
             if let Some(run) = &mut self.run {
                 if st.run_id == run.id {
                     run.planner_state = Some(st.state);
+                    if let Some(x) = &mut run.experiment {
+                        if matches!(
+                            st.state,
+                            planner_state::PLANNING
+                                | planner_state::RUNNING
+                                | planner_state::PAUSED
+                        ) {
+                            x.awaiting_start = false;
+                        }
+                    }
                     run.progress_s = st.progress_s;
                     run.duration_s = st.duration_s;
                     if matches!(st.state, planner_state::RUNNING | planner_state::PAUSED) {
@@ -1012,6 +1188,33 @@ impl Supervisor {
                     }
                     if run.ended.is_none() {
                         match st.state {
+                            planner_state::DONE if run.experiment.is_some() => {
+                                let Some(x) = &mut run.experiment else {
+                                    continue;
+                                };
+                                if x.awaiting_start {
+                                    // The previous command's DONE: the next is being planned.
+                                } else if x.next < x.commands.len() {
+                                    let c = x.commands[x.next];
+                                    tracing::info!(
+                                        "run {}: command {}/{} ({})",
+                                        run.id,
+                                        x.next + 1,
+                                        x.commands.len(),
+                                        x.labels[x.next]
+                                    );
+                                    x.next += 1;
+                                    x.awaiting_start = true;
+                                    run.cmd = c;
+                                    run.started = now;
+                                    if let Err(e) = self.pub_cmd.send_copy(c) {
+                                        run.ended = Some((now, "aborted (command not sent)"));
+                                        eprintln!("pcr-supervisor: run {}: {e:?}", run.id);
+                                    }
+                                } else {
+                                    run.ended = Some((now, "done"));
+                                }
+                            }
                             planner_state::DONE => run.ended = Some((now, "done")),
                             planner_state::STOPPED => run.ended = Some((now, "stopped")),
                             planner_state::REFUSED => run.ended = Some((now, "refused")),
@@ -1022,6 +1225,7 @@ impl Supervisor {
             }
         }
         self.finish_run_if_over(now);
+        self.start_prepared();
         // Start the requested program once everybody is up.
         if self.opts.one_shot() {
             if !self.requested_run_started && self.all_healthy() && self.safe_stop.is_none() {
@@ -1265,7 +1469,18 @@ impl Run {
             row.measured = p;
             row.flags |= driver_flags::POSE_VALID;
         }
-        if let Err(e) = self.recorder.row_with(&row, &measured) {
+        let written = match &mut self.experiment {
+            None => self.recorder.row_with(&row, &measured),
+            Some(x) => match self.recorder.row_of(&row, &measured) {
+                Some(mut r) => {
+                    let cells = x.annotator.annotate(&mut r).extra_cells();
+                    let cells: [Option<&str>; 3] = std::array::from_fn(|i| cells[i].as_deref());
+                    self.recorder.write(&r, &cells)
+                }
+                None => Ok(()),
+            },
+        };
+        if let Err(e) = written {
             tracing::error!("recording {}: {e}", self.path.display());
         }
         self.acc.add(&row);

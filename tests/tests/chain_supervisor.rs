@@ -707,6 +707,63 @@ fn ctl_runs_a_list_of_moves_with_pause_and_resume() {
 }
 
 #[test]
+fn ctl_runs_an_experiment_live_and_labels_its_rows() {
+    let _g = lock();
+    let chain = Chain::new("exp", "heartbeat_timeout_ms = 2000.0", "");
+    let (mut sup, out, err) = chain.supervisor(&[]);
+    let mut e = Vec::new();
+    chain.wait_ready(&err, &mut e);
+    // A bad option is refused by name before anything moves.
+    let o = chain.ctl_output("run experiment calibration pionts=3");
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stdout).contains("pionts"));
+    // Three poses (one boundary at scale 0.5, phi 0), short dwells: several chain commands.
+    let o = chain.ctl_output(
+        "run experiment calibration points=3 phis-deg=0 scales=0.5 test-per-group=1 \
+         settle=0.4 measure=0.3 speed=40",
+    );
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{text}{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(
+        text.contains("run 1 (experiment-calibration) started"),
+        "{text}"
+    );
+    let mut lines = Vec::new();
+    assert!(
+        wait_for(
+            &out,
+            "run 1 (experiment-calibration): done",
+            Duration::from_secs(90),
+            &mut lines
+        ),
+        "{lines:?}"
+    );
+    let rec = recording_of(&chain).expect("the experiment's recording");
+    let r = pcr_recording::Recording::read_path(&rec).unwrap();
+    assert_eq!(r.meta("experiment"), Some("calibration"));
+    let poses = pcr_recording::settled_poses(&r, "live").unwrap();
+    assert_eq!(poses.len(), 3, "{poses:?}");
+    let mut ids: Vec<u64> = poses.iter().map(|p| p.pose_id.unwrap()).collect();
+    ids.sort_unstable();
+    ids.dedup();
+    assert_eq!(ids.len(), 3);
+    for p in &poses {
+        assert!(p.set.is_some() && p.rows >= 5, "{p:?}");
+        // The ideal drive reaches the target: the measured pose is the planned one.
+        let (m, pl) = (p.pose.unwrap(), p.planned.unwrap());
+        assert!((m[0] - pl[0]).hypot(m[1] - pl[1]) < 0.5, "{p:?}");
+    }
+    assert!(chain.ctl("shutdown").contains("shutting down"));
+    let st = wait_exit(&mut sup, Duration::from_secs(30));
+    assert!(st.success(), "{st:?}");
+    assert!(chain.leftovers().is_empty(), "{:?}", chain.leftovers());
+}
+
+#[test]
 fn a_briefly_stalled_driver_rearms_its_watchdog_and_the_run_completes() {
     let _g = lock();
     let chain = Chain::new("stall", "heartbeat_timeout_ms = 3000.0", "");
