@@ -717,10 +717,11 @@ fn ctl_runs_an_experiment_live_and_labels_its_rows() {
     let o = chain.ctl_output("run experiment calibration pionts=3");
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stdout).contains("pionts"));
-    // Three poses (one boundary at scale 0.5, phi 0), short dwells: several chain commands.
+    // Three poses (one boundary at scale 0.2, phi 0) approached four times each, short
+    // dwells: 12 visits, more than one chain command (10 visits per command).
     let o = chain.ctl_output(
-        "run experiment calibration points=3 phis-deg=0 scales=0.5 test-per-group=1 \
-         settle=0.4 measure=0.3 speed=40",
+        "run experiment repeatability points=3 phis-deg=0 scales=0.2 test-per-group=1 reps=4 \
+         settle=0.3 measure=0.3 speed=40",
     );
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(
@@ -729,14 +730,14 @@ fn ctl_runs_an_experiment_live_and_labels_its_rows() {
         String::from_utf8_lossy(&o.stderr)
     );
     assert!(
-        text.contains("run 1 (experiment-calibration) started"),
+        text.contains("run 1 (experiment-repeatability) started"),
         "{text}"
     );
     let mut lines = Vec::new();
     assert!(
         wait_for(
             &out,
-            "run 1 (experiment-calibration): done",
+            "run 1 (experiment-repeatability): done",
             Duration::from_secs(90),
             &mut lines
         ),
@@ -744,15 +745,19 @@ fn ctl_runs_an_experiment_live_and_labels_its_rows() {
     );
     let rec = recording_of(&chain).expect("the experiment's recording");
     let r = pcr_recording::Recording::read_path(&rec).unwrap();
-    assert_eq!(r.meta("experiment"), Some("calibration"));
+    assert_eq!(r.meta("experiment"), Some("repeatability"));
+    assert_eq!(r.meta("commands"), Some("2"));
     let poses = pcr_recording::settled_poses(&r, "live").unwrap();
-    assert_eq!(poses.len(), 3, "{poses:?}");
-    let mut ids: Vec<u64> = poses.iter().map(|p| p.pose_id.unwrap()).collect();
+    assert_eq!(poses.len(), 12, "{poses:?}");
+    let mut ids: Vec<(u64, u64)> = poses
+        .iter()
+        .map(|p| (p.pose_id.unwrap(), p.rep.unwrap()))
+        .collect();
     ids.sort_unstable();
     ids.dedup();
-    assert_eq!(ids.len(), 3);
+    assert_eq!(ids.len(), 12, "every (pose, rep) visited once: {ids:?}");
     for p in &poses {
-        assert!(p.set.is_some() && p.rows >= 5, "{p:?}");
+        assert!(p.rows >= 5, "{p:?}");
         // The ideal drive reaches the target: the measured pose is the planned one.
         let (m, pl) = (p.pose.unwrap(), p.planned.unwrap());
         assert!((m[0] - pl[0]).hypot(m[1] - pl[1]) < 0.5, "{p:?}");
