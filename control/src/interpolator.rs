@@ -1,5 +1,7 @@
 //! The interpolator step: runs a [`SetpointSource`] on the chain's clock, with pause, resume and
-//! stop, and emits one [`TaskSetpoint`] per cycle.
+//! stop, and emits one [`TaskSetpoint`] per cycle. It is the stack's one interpolator: the
+//! `pcr-planner` process and the in-process runtime step it on the chain's clock, `pcr plan`
+//! on a simulated one ([`crate::offline`]).
 
 use crate::setpoint::{paper_circle, paper_program, paper_square, Move, PlanError, SetpointSource};
 use pcr_kinematics::Pose;
