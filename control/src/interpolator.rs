@@ -1,5 +1,7 @@
 //! The interpolator step: runs a [`SetpointSource`] on the chain's clock, with pause, resume and
-//! stop, and emits one [`TaskSetpoint`] per cycle.
+//! stop, and emits one [`TaskSetpoint`] per cycle. It is the stack's one interpolator: the
+//! `pcr-planner` process and the in-process runtime step it on the chain's clock, `pcr plan`
+//! on a simulated one ([`crate::offline`]).
 
 use crate::setpoint::{paper_circle, paper_program, paper_square, Move, PlanError, SetpointSource};
 use pcr_kinematics::Pose;
@@ -412,6 +414,8 @@ struct Ramp {
     t: f64,
     /// Program time when it began, s.
     tau0: f64,
+    /// The rate it ends at (exactly; the profile's end may differ by rounding).
+    target: f64,
 }
 
 /// Setpoints remembered for rewinding (64 cycles = 1.28 s at 20 ms).
@@ -469,6 +473,7 @@ impl<S: SetpointSource> InterpolatorStep<S> {
                     traj,
                     t: 0.0,
                     tau0: self.tau_s,
+                    target,
                 })
             }
             Err(_) => {
@@ -486,11 +491,10 @@ impl<S: SetpointSource> InterpolatorStep<S> {
                 r.t += dt;
                 let d = r.traj.duration();
                 let (st, _) = r.traj.at_dof(0, r.t.min(d));
-                let target = r.traj.profile(0).end().v;
                 let over = (r.t - d).max(0.0);
-                self.tau_s = r.tau0 + st.p + target * over;
+                self.tau_s = r.tau0 + st.p + r.target * over;
                 if r.t >= d {
-                    self.rate = target;
+                    self.rate = r.target;
                     self.ramp = None;
                 }
             }
@@ -532,16 +536,7 @@ impl<S: SetpointSource> InterpolatorStep<S> {
             command_kind::RUN => {
                 self.can_start()?;
                 let moves = moves_of(cmd)?;
-                match self.source.load(&moves, self.hold) {
-                    Ok(d) => {
-                        self.start_program(d, cmd.run_id);
-                        Ok(())
-                    }
-                    Err(e) => {
-                        self.refuse(cmd.run_id);
-                        Err(e.into())
-                    }
-                }
+                self.run_moves(&moves, cmd.run_id)
             }
             command_kind::RECOVER => {
                 self.can_start()?;
@@ -572,6 +567,45 @@ impl<S: SetpointSource> InterpolatorStep<S> {
                 Ok(())
             }
             k => Err(CommandError::Malformed(format!("unknown command kind {k}"))),
+        }
+    }
+
+    /// Starts run `run_id` of `moves` from the held pose, as a RUN command of them does (plans
+    /// them on the source, so it allocates: between cycles only). For programs that the wire
+    /// form cannot carry in one command (e.g. `pcr plan` of a long program file).
+    pub fn run_moves(&mut self, moves: &[Move], run_id: u32) -> Result<(), CommandError> {
+        self.can_start()?;
+        match self.source.load(moves, self.hold) {
+            Ok(d) => {
+                self.start_program(d, run_id);
+                Ok(())
+            }
+            Err(e) => {
+                self.refuse(run_id);
+                Err(e.into())
+            }
+        }
+    }
+
+    /// The program-time rate now: 1 while running, 0 while paused or stopped, in between while
+    /// a pause or stop brakes or a resume accelerates.
+    pub fn program_rate(&self) -> f64 {
+        match self.state {
+            planner_state::RUNNING | planner_state::PAUSED | planner_state::STOPPED => {
+                self.rate_state().0
+            }
+            _ => 0.0,
+        }
+    }
+
+    /// Path speed of the nominal pose of the last setpoint, mm/s: the source's speed at the
+    /// program time, times the program-time rate (0 when holding). Allocation-free.
+    pub fn speed_mm_s(&self) -> f64 {
+        let rate = self.program_rate();
+        if rate == 0.0 || self.tau_s >= self.duration_s {
+            0.0
+        } else {
+            self.source.speed(self.tau_s) * rate
         }
     }
 
@@ -711,6 +745,9 @@ impl<S: SetpointSource> InterpolatorStep<S> {
                 self.hold = self.source.sample(self.tau_s);
                 flags |= task_flags::ACTIVE;
                 if self.tau_s >= self.duration_s {
+                    // (a resume ramp that has not ended with the program ends here: it would
+                    // never be stepped again, and the next program would wait for it)
+                    self.ramp = None;
                     self.state = planner_state::DONE;
                     flags |= task_flags::DONE;
                     self.done_sent = true;
@@ -827,6 +864,35 @@ mod tests {
             prev = sp;
         }
         assert!((v - v_last).abs() < 1.0, "back to speed: {v} vs {v_last}");
+    }
+
+    #[test]
+    fn a_program_that_ends_while_resuming_lets_the_next_one_start() {
+        // 1 s of program; a pause early, and a resume whose ramp (rate limits 1/s^2, 10/s^3
+        // with the default braking) outlasts the rest of the program
+        let run = command_of_moves(1, &[Move::Dwell { duration_s: 1.0 }]).unwrap();
+        let mut s = InterpolatorStep::new(InterimPathSource::new(), Pose::default());
+        s.command(&run).unwrap();
+        let mut t = 0.0;
+        for k in 0..400 {
+            match k {
+                10 => s
+                    .command(&simple_command(command_kind::PAUSE, 0, 1))
+                    .unwrap(),
+                200 => s
+                    .command(&simple_command(command_kind::RESUME, 0, 1))
+                    .unwrap(),
+                _ => {}
+            }
+            s.step(t);
+            t += 0.02;
+        }
+        assert_eq!(s.status(t).state, planner_state::DONE);
+        assert_eq!(s.program_rate(), 0.0);
+        assert!(s.can_start().is_ok());
+        let mut next = run;
+        next.run_id = 2;
+        s.command(&next).unwrap();
     }
 
     #[test]

@@ -5,8 +5,10 @@
 //! simulated clock for fast deterministic experiments and tests. Each `step` takes the cycle's
 //! input and returns its output, is short and does not allocate.
 //!
-//! * [`InterpolatorStep`] around a [`SetpointSource`] (interim: [`InterimPathSource`]; the
-//!   planner's interpolator implements the same trait),
+//! * [`InterpolatorStep`] around a [`SetpointSource`] ([`PlannerSource`]: the planner's
+//!   jerk-limited paths; interim: [`InterimPathSource`]): the one 20 ms interpolator, with one
+//!   pause/resume/stop behaviour, of the `pcr-planner` process, the in-process runtime and
+//!   `pcr plan` ([`offline`]: the same step on a simulated clock, without IPC),
 //! * [`IkStep`] (pcr-kinematics),
 //! * [`DriverStep`] around any [`pcr_driver::Driver`] and a [`PoseSensor`] (interim plant:
 //!   [`IdealDrive`] + [`FkPoseSensor`]; the simulated plant implements the same two traits),
@@ -22,6 +24,7 @@ pub mod drive;
 pub mod driver_step;
 pub mod ik;
 pub mod interpolator;
+pub mod offline;
 pub mod planned;
 pub mod plant_drive;
 pub mod recorder;
@@ -42,11 +45,14 @@ pub use interpolator::{
     command_of_moves, moves_of, prepare_run, simple_command, CommandError, InterpolatorStep,
     PreparedRun,
 };
+pub use offline::{plan_moves, OfflinePlan, PlannedCycle, CYCLE_S};
 pub use planned::{MotionLimits, PlannerSource};
 pub use plant_drive::{plant_backend, PlantDrive, PlantSensor};
 pub use recorder::{Measured, Recorder};
-pub use runtime::{CycleOutput, InProcessChain, InterimChain, RunError, SimChain, SimChainError};
+pub use runtime::{
+    CycleOutput, IdealChain, InProcessChain, InterimChain, RunError, SimChain, SimChainError,
+};
 pub use setpoint::{
-    moves_of_program, paper_circle, paper_program, paper_square, Braking, InterimPathSource, Move,
-    PlanError, SetpointSource,
+    circle_program, moves_of_program, paper_circle, paper_program, paper_square, square_program,
+    Braking, InterimPathSource, Move, PlanError, SetpointSource,
 };

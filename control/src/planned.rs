@@ -73,6 +73,8 @@ pub struct PlannerSource {
     start: Pose,
     /// Peak path speed of the loaded program, mm/s.
     peak_speed: f64,
+    /// What `load` checks (singularity margin, fraction of the step rates).
+    check: CheckOptions,
 }
 
 fn pp(p: &Pose) -> PPose {
@@ -94,6 +96,30 @@ impl PlannerSource {
             joint_table: Vec::new(),
             start: Pose::default(),
             peak_speed: 0.0,
+            check: CheckOptions::default(),
+        }
+    }
+
+    /// The source checking programs with `check` (singularity margin, fraction of each drive's
+    /// step rate; joint moves use that fraction of the step rates too) instead of the defaults.
+    pub fn with_check_options(mut self, check: CheckOptions) -> Self {
+        self.check = check;
+        self
+    }
+
+    /// The path speed limit at program time `tau_s` inside a composite motion (its segment's
+    /// own limit), mm/s; NaN elsewhere (rest-to-rest moves, dwells, joint moves).
+    pub fn speed_limit_at(&self, tau_s: f64) -> f64 {
+        if self.pieces.is_empty() || tau_s < 0.0 {
+            return f64::NAN;
+        }
+        let (t0, d, piece) = &self.pieces[active_piece(&self.pieces, tau_s)];
+        match piece {
+            Piece::Composite(i) if tau_s - t0 < *d => {
+                let m = &self.composites[*i];
+                m.segment_speed_limit(m.sample(tau_s - t0).segment)
+            }
+            _ => f64::NAN,
         }
     }
 
@@ -189,7 +215,7 @@ impl PlannerSource {
             }
             samples.push((t0 + t, kp(&motion.sample(t).pose)));
         }
-        if let Err(e) = self.robot.check_motion(samples, &CheckOptions::default()) {
+        if let Err(e) = self.robot.check_motion(samples, &self.check) {
             let seg = motion.sample(e.t - t0).segment;
             let index = match path.segments().get(seg).map(|s| s.source()) {
                 Some(SegmentSource::Primitive(k)) | Some(SegmentSource::Blend(k)) => first + k,
@@ -239,7 +265,7 @@ impl PlannerSource {
         };
         let mut limits = JointLimits::from_config(
             self.robot.config(),
-            1.0,
+            self.check.rate_fraction,
             settings.acceleration,
             settings.jerk,
         )
@@ -250,7 +276,7 @@ impl PlannerSource {
         }
         let mv = JointMove::plan(from, target, &limits).map_err(|e| invalid(&e))?;
         let samples = mv
-            .check(&self.robot, JOINT_TABLE_DT_S, &at, &CheckOptions::default())
+            .check(&self.robot, JOINT_TABLE_DT_S, &at, &self.check)
             .map_err(|e| match e {
                 JointError::Rejected(r) => PlanError::Rejected {
                     index,
@@ -454,7 +480,7 @@ impl SetpointSource for PlannerSource {
                 })
                 .collect();
             self.robot
-                .check_motion(samples, &CheckOptions::default())
+                .check_motion(samples, &self.check)
                 .map_err(|e| PlanError::Rejected {
                     index: *index,
                     why: e.to_string(),
@@ -488,6 +514,40 @@ impl SetpointSource for PlannerSource {
             piece,
             (tau_s - t0).clamp(0.0, *d),
         )
+    }
+
+    fn speed(&self, tau_s: f64) -> f64 {
+        if self.pieces.is_empty() || tau_s <= 0.0 {
+            return 0.0;
+        }
+        let (t0, d, piece) = &self.pieces[active_piece(&self.pieces, tau_s)];
+        let t = tau_s - t0;
+        if t >= *d {
+            return 0.0;
+        }
+        match piece {
+            Piece::Move { profile, .. } => profile.at(t).v,
+            Piece::Hold(_) => 0.0,
+            Piece::Composite(i) => self.composites[*i].sample(t).speed,
+            Piece::Joint { first, n } => {
+                // The table's slope (combined metric, the path's rotation radius of 50 mm/rad).
+                let table = &self.joint_table[*first..*first + *n];
+                if table.len() < 2 {
+                    return 0.0;
+                }
+                let k = ((t / JOINT_TABLE_DT_S).max(0.0) as usize).min(table.len() - 2);
+                let ((ta, a), (tb, b)) = (table[k], table[k + 1]);
+                let r = pcr_planner::path::DEFAULT_ROTATION_RADIUS_MM;
+                let dist =
+                    ((b.x - a.x).powi(2) + (b.y - a.y).powi(2) + (r * (b.phi - a.phi)).powi(2))
+                        .sqrt();
+                if tb > ta {
+                    dist / (tb - ta)
+                } else {
+                    0.0
+                }
+            }
+        }
     }
 }
 

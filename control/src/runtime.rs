@@ -62,26 +62,46 @@ pub type InterimChain = InProcessChain<InterimPathSource, SafeDriver<IdealDrive>
 impl InterimChain {
     /// The interim chain for `robot` at `period_s`, starting at home.
     pub fn interim(robot: Robot, period_s: f64) -> Self {
-        let ik = IkStep::new(robot.clone());
-        let home: [i32; 3] = std::array::from_fn(|i| {
-            robot
-                .kappa_to_steps(i, robot.home_kappa[i])
-                .map_or(0, |s| s.round() as i32)
-        });
-        let drive = safety_stack(
-            IdealDrive::new(home, max_step_rate(&robot)),
-            &robot,
-            5.0 * period_s,
-        );
-        let sensor = FkPoseSensor::new(robot);
-        InProcessChain::new(
-            InterpolatorStep::new(InterimPathSource::new(), Pose::default()),
-            ik,
-            DriverStep::new(drive, sensor, period_s),
-            CorrectionStep::pass_through(),
-            period_s,
-        )
+        ideal_chain(InterimPathSource::new(), robot, period_s)
     }
+}
+
+/// The chain on the planner's jerk-limited paths ([`PlannerSource`]) and the ideal drive
+/// ([`IdealDrive`] in the safety stack, [`FkPoseSensor`], correction with gain 0): what it
+/// records as planned poses is what `pcr plan` ([`crate::offline`]) plans.
+pub type IdealChain = InProcessChain<PlannerSource, SafeDriver<IdealDrive>, FkPoseSensor>;
+
+impl IdealChain {
+    /// The chain for `robot` with path `limits` at `period_s` on the ideal drive, at home.
+    pub fn ideal(robot: Robot, limits: MotionLimits, period_s: f64) -> Self {
+        ideal_chain(PlannerSource::new(robot.clone(), limits), robot, period_s)
+    }
+}
+
+fn ideal_chain<S: SetpointSource>(
+    source: S,
+    robot: Robot,
+    period_s: f64,
+) -> InProcessChain<S, SafeDriver<IdealDrive>, FkPoseSensor> {
+    let ik = IkStep::new(robot.clone());
+    let home: [i32; 3] = std::array::from_fn(|i| {
+        robot
+            .kappa_to_steps(i, robot.home_kappa[i])
+            .map_or(0, |s| s.round() as i32)
+    });
+    let drive = safety_stack(
+        IdealDrive::new(home, max_step_rate(&robot)),
+        &robot,
+        5.0 * period_s,
+    );
+    let sensor = FkPoseSensor::new(robot);
+    InProcessChain::new(
+        InterpolatorStep::new(source, Pose::default()),
+        ik,
+        DriverStep::new(drive, sensor, period_s),
+        CorrectionStep::pass_through(),
+        period_s,
+    )
 }
 
 /// The chain on the real parts: the planner's jerk-limited paths ([`PlannerSource`]), the

@@ -1,11 +1,13 @@
 //! Where task-space setpoints come from: the [`SetpointSource`] interface and the interim
 //! constant-speed path generator [`InterimPathSource`].
 //!
-//! The real jerk-limited planner (`pcr-planner`, its 20 ms `Interpolator`) plugs in by
-//! implementing [`SetpointSource`]: `load` plans a list of [`Move`]s from rest at a start pose
-//! and returns the duration, `sample` returns the pose at a program time. Everything else
-//! (pause, stop, run ids, cycle counting, corrections) lives in
-//! [`crate::InterpolatorStep`], which wraps any source.
+//! The jerk-limited planner ([`crate::PlannerSource`], on `pcr-planner`'s paths, composites
+//! and joint moves) implements [`SetpointSource`]: `load` plans a list of [`Move`]s from rest
+//! at a start pose and returns the duration, `sample` returns the pose at a program time.
+//! Everything else (the 20 ms cycle, pause, resume, stop, run ids, corrections) lives in
+//! [`crate::InterpolatorStep`], which wraps any source: it is the one interpolator of the
+//! stack (the `pcr-planner` process, the in-process runtime and `pcr plan` through
+//! [`crate::offline`]).
 
 use pcr_kinematics::Pose;
 use pcr_planner::program::{JointSettings, PathLimits, Program, Step};
@@ -184,7 +186,8 @@ pub fn active_piece<T>(pieces: &[(f64, f64, T)], tau_s: f64) -> usize {
 /// A source of task-space setpoints (the interpolator's core).
 ///
 /// Implementations: [`InterimPathSource`] (here, interim) and the planner's jerk-limited
-/// interpolator (to come). `sample` is called once per control cycle and must not allocate.
+/// paths ([`crate::PlannerSource`]). `sample` is called once per control cycle and must not
+/// allocate.
 pub trait SetpointSource: Clone {
     /// A short name for logs.
     fn name(&self) -> &str;
@@ -200,6 +203,15 @@ pub trait SetpointSource: Clone {
     /// brakes by scaling program time, so the path is kept exactly.
     fn braking(&self) -> Braking {
         Braking::default()
+    }
+
+    /// Path speed at program time `tau_s` (at program-time rate 1), mm/s (combined metric where
+    /// the source has one). The default differentiates [`SetpointSource::sample`] numerically.
+    /// Must not allocate.
+    fn speed(&self, tau_s: f64) -> f64 {
+        let h = 1e-4;
+        let (a, b) = (self.sample(tau_s - h), self.sample(tau_s + h));
+        (b.x - a.x).hypot(b.y - a.y) / (2.0 * h)
     }
 }
 
@@ -398,18 +410,31 @@ impl SetpointSource for InterimPathSource {
 /// The paper's circle: from the current pose to (50, 0) mm, one circle of radius 50 mm around
 /// the origin at 50 mm/s (phi = 0), back to the origin.
 pub fn paper_circle() -> Vec<Move> {
+    circle_program([0.0, 0.0], 50.0, 50.0, 0.0, Pose::default())
+}
+
+/// A circle program as the paper's: a dwell of 0.2 s, a line to `centre + (radius, 0)` and one
+/// counter-clockwise circle at `speed_mm_s` (orientation `phi` rad), a dwell of 0.2 s and a line
+/// to `back`.
+pub fn circle_program(
+    centre: [f64; 2],
+    radius_mm: f64,
+    speed_mm_s: f64,
+    phi: f64,
+    back: Pose,
+) -> Vec<Move> {
     vec![
         Move::Dwell { duration_s: 0.2 },
         Move::Circle {
-            centre: [0.0, 0.0],
-            radius_mm: 50.0,
-            speed_mm_s: 50.0,
-            phi: 0.0,
+            centre,
+            radius_mm,
+            speed_mm_s,
+            phi,
         },
         Move::Dwell { duration_s: 0.2 },
         Move::Line {
-            to: Pose::default(),
-            speed_mm_s: 50.0,
+            to: back,
+            speed_mm_s,
         },
     ]
 }
@@ -417,24 +442,39 @@ pub fn paper_circle() -> Vec<Move> {
 /// The paper's square: 50 mm side centred on the origin, rest-to-rest sides at 50 mm/s peak,
 /// from and back to the origin.
 pub fn paper_square() -> Vec<Move> {
+    square_program([0.0, 0.0], 50.0, 50.0, 0.0, Pose::default())
+}
+
+/// A square program as the paper's: a dwell of 0.2 s, a line to the corner
+/// `centre + (side/2, -side/2)`, then counter-clockwise rest-to-rest sides at `speed_mm_s` peak
+/// (orientation `phi` rad) with a dwell of 0.1 s after each line, and a line to `back`.
+pub fn square_program(
+    centre: [f64; 2],
+    side_mm: f64,
+    speed_mm_s: f64,
+    phi: f64,
+    back: Pose,
+) -> Vec<Move> {
+    let h = side_mm / 2.0;
+    let [cx, cy] = centre;
     let c = [
-        (25.0, -25.0),
-        (25.0, 25.0),
-        (-25.0, 25.0),
-        (-25.0, -25.0),
-        (25.0, -25.0),
+        (cx + h, cy - h),
+        (cx + h, cy + h),
+        (cx - h, cy + h),
+        (cx - h, cy - h),
+        (cx + h, cy - h),
     ];
     let mut v = vec![Move::Dwell { duration_s: 0.2 }];
     for (x, y) in c {
         v.push(Move::Line {
-            to: Pose::new(x, y, 0.0),
-            speed_mm_s: 50.0,
+            to: Pose::new(x, y, phi),
+            speed_mm_s,
         });
         v.push(Move::Dwell { duration_s: 0.1 });
     }
     v.push(Move::Line {
-        to: Pose::default(),
-        speed_mm_s: 50.0,
+        to: back,
+        speed_mm_s,
     });
     v
 }

@@ -9,13 +9,9 @@ fn err<E: std::fmt::Debug>(e: E) -> anyhow::Error {
     anyhow!("drawing failed: {e:?}")
 }
 
-/// `rows` are (t s, x mm, y mm, speed mm/s) every 20 ms.
-pub fn plan_svg(path: &str, robot: &Robot, rows: &[(f64, f64, f64, f64)]) -> Result<()> {
-    plan_svg_with_limit(path, robot, rows, &[])
-}
-
-/// As [`plan_svg`], with the speed limit along the path (mm/s, one per row; NaN where there is
-/// none, e.g. dwells and joint moves) drawn in grey behind the speed.
+/// `rows` are (t s, x mm, y mm, speed mm/s) every 20 ms, with the speed limit along the path
+/// (mm/s, one per row; NaN where there is none, e.g. dwells, rest-to-rest lines and joint
+/// moves) drawn in grey behind the speed.
 pub fn plan_svg_with_limit(
     path: &str,
     robot: &Robot,

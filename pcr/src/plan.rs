@@ -1,33 +1,39 @@
-//! `pcr plan`: a task-space path into a checked 20 ms setpoint sequence.
+//! `pcr plan`: a task-space program into a checked 20 ms setpoint sequence, by the chain's own
+//! interpolator.
 //!
-//! The motion is built from planner paths (an approach line from the start pose, then the shape),
-//! checked finely (every 2 ms along each motion: IK in the working mode, joint and bending
-//! limits, singularity margin, drive step-rate limits), and interpolated by the same 20 ms
-//! [`Interpolator`] the running system uses. The output CSV has one row per cycle: time, planned
-//! pose (xp_mm, yp_mm, phip_deg, which `pcr plant run` copies into its recording), speed along the
-//! path, curvatures and motor steps (q1..q3, the setpoints).
+//! Each shape (`circle`, `square`, `line`, `paper`), a program file (`program`) or a joint move
+//! (`joint`) becomes the chain's program: a list of [`Move`]s, the same the supervisor sends and
+//! the chain runs (`circle --radius 50 --speed 50` is the chain's built-in CIRCLE, `square
+//! --side 50 --speed 50` its SQUARE, `paper` its PAPER). It is planned and checked by the
+//! chain's [`PlannerSource`] (every 2 ms: IK in the working mode, joint and bending limits,
+//! singularity margin, drive step-rate limits) and stepped every 20 ms by the chain's
+//! [`InterpolatorStep`] on a simulated clock ([`pcr_control::offline`]): the rows are the poses
+//! the running chain (the `pcr-planner` process, or the in-process runtime) commands for the
+//! same program, cycle by cycle. `--pause-at`, `--resume-at` and `--stop-at` request the chain's
+//! PAUSE, RESUME and STOP at a time, so that the braking is planned as the chain brakes.
+//!
+//! The output CSV has one row per cycle: time, planned pose (xp_mm, yp_mm, phip_deg, which `pcr
+//! plant run` copies into its recording), speed along the path, curvatures and motor steps
+//! (q1..q3, the setpoints).
 //!
 //! `pcr plan program --file prog.toml` plans a program of lines, arcs, dwells and joint moves
 //! ([`program`]): consecutive lines and arcs form one composite motion
 //! ([`pcr_planner::composite`]) that keeps its speed through smooth junctions; joint moves
 //! ([`pcr_planner::joint`]) are synchronised motor moves whose poses follow by forward
-//! kinematics. `pcr plan joint --steps a,b,c` is a single joint move. Both are checked the same
-//! way (every 2 ms) and sampled every 20 ms into the same CSV.
-
-use pcr_planner::program;
+//! kinematics. `pcr plan joint --steps a,b,c` is a single joint move.
 
 use crate::csvio::fmt;
 use anyhow::{anyhow, bail, Context, Result};
-use clap::{Args as ClapArgs, Subcommand, ValueEnum};
-use pcr_kinematics::{CheckOptions, Pose as KPose, Robot};
-use pcr_planner::composite::{
-    CompositeError, CompositeLimits, CompositeMotion, CompositePath, SegmentSource,
+use clap::{Args as ClapArgs, Subcommand};
+use pcr_control::{
+    circle_program, moves_of_program, plan_moves, square_program, CommandError, MotionLimits, Move,
+    PlanError, PlannedCycle, PlannerSource, CYCLE_S,
 };
-use pcr_planner::interpolator::{Interpolator, MotionCommand, Phase, CYCLE_S};
-use pcr_planner::joint::{JointError, JointLimits, JointMove};
-use pcr_planner::path::{Path, Pose};
-use pcr_planner::speed::{SpeedLimits, SpeedProfile};
+use pcr_kinematics::{CheckOptions, Pose, Robot};
+use pcr_messages::command_kind;
+use pcr_planner::program::{self, JointSettings, PathLimits};
 use pcr_robot::RobotConfig;
+use std::f64::consts::TAU;
 
 /// Arguments of `pcr plan`.
 #[derive(ClapArgs)]
@@ -55,13 +61,18 @@ pub struct Args {
     /// Path acceleration limit, mm/s^2.
     #[arg(long, default_value_t = 200.0, global = true)]
     amax: f64,
-    /// Path jerk limit, mm/s^3 (jerk-limited profiles).
+    /// Path jerk limit, mm/s^3.
     #[arg(long, default_value_t = 2000.0, global = true)]
     jmax: f64,
-    /// Speed profile along each motion (default: jerk-limited for circles and lines,
-    /// trapezoidal for the square's rest-to-rest sides, as in the paper).
+    /// Request a pause at this time, s (the chain's PAUSE: it brakes along the path).
     #[arg(long, global = true)]
-    profile: Option<ProfileKind>,
+    pause_at: Option<f64>,
+    /// Request a resume at this time, s (after --pause-at).
+    #[arg(long, global = true)]
+    resume_at: Option<f64>,
+    /// Request a stop at this time, s (the chain's STOP: it brakes along the path and ends).
+    #[arg(long, global = true)]
+    stop_at: Option<f64>,
     /// Required conditioning, as a multiple of the robot's singularity threshold.
     #[arg(long, default_value_t = 1.0, global = true)]
     singularity_margin: f64,
@@ -70,17 +81,11 @@ pub struct Args {
     rate_fraction: f64,
 }
 
-#[derive(Clone, Copy, PartialEq, ValueEnum)]
-enum ProfileKind {
-    /// Constant speed with jerk-limited start and stop.
-    Jerk,
-    /// Trapezoidal speed (acceleration-limited).
-    Trapezoidal,
-}
-
 #[derive(Subcommand)]
 enum Shape {
-    /// A full circle at constant orientation (the paper: radius 50 mm at 50 mm/s).
+    /// A full circle at constant orientation, as the chain's circle program (the paper: radius
+    /// 50 mm at 50 mm/s, the chain's built-in CIRCLE): a dwell of 0.2 s, a line to the start
+    /// point, the circle, a dwell of 0.2 s and a line back to --from.
     Circle {
         /// Radius, mm.
         #[arg(long)]
@@ -97,14 +102,18 @@ enum Shape {
         /// Platform orientation, degrees.
         #[arg(long = "phi-deg", default_value_t = 0.0, allow_hyphen_values = true)]
         phi_deg: f64,
-        /// Polar angle of the start point on the circle, degrees.
+        /// Polar angle of the start point on the circle, degrees (other than 0, or with --cw,
+        /// the circle is planned as one full arc of a composite path, with the same limits).
         #[arg(long = "start-deg", default_value_t = 0.0, allow_hyphen_values = true)]
         start_deg: f64,
         /// Clockwise instead of counter-clockwise.
         #[arg(long)]
         cw: bool,
     },
-    /// A square of rest-to-rest sides (the paper: 50 mm side).
+    /// A square of rest-to-rest sides, as the chain's square program (the paper: 50 mm side at
+    /// 50 mm/s, the chain's built-in SQUARE): a dwell of 0.2 s, a line to the corner at
+    /// (+side/2, -side/2), counter-clockwise sides with a dwell of 0.1 s after each line, and a
+    /// line back to --from.
     Square {
         /// Side length, mm.
         #[arg(long)]
@@ -137,7 +146,8 @@ enum Shape {
         #[arg(long)]
         speed: f64,
     },
-    /// The paper's test program: the 50 mm circle at 50 mm/s, then the 50 mm square.
+    /// The paper's test program (the chain's built-in PAPER): the 50 mm circle at 50 mm/s, then
+    /// the 50 mm square.
     Paper {
         /// Speed along the paths, mm/s.
         #[arg(long, default_value_t = 50.0)]
@@ -191,83 +201,78 @@ fn parse_pose(s: &str, what: &str) -> Result<Pose> {
     Ok(Pose::new(v[0], v[1], v[2].to_radians()))
 }
 
-/// One motion of the plan, with a name for messages.
-struct Motion {
-    name: String,
-    cmd: MotionCommand,
+/// The chain's program of a `pcr plan` command.
+pub struct PlanProgram {
+    /// The moves.
+    pub moves: Vec<Move>,
+    /// A name of each move, for messages.
+    pub names: Vec<String>,
+    /// The start pose.
+    pub start: Pose,
+    /// The program file (prefix of messages), if any.
+    pub file: Option<String>,
 }
 
-fn limits(kind: ProfileKind, speed: f64, a: &Args) -> SpeedLimits {
-    match kind {
-        ProfileKind::Jerk => SpeedLimits::JerkLimited {
-            vmax: speed,
-            amax: a.amax,
-            jmax: a.jmax,
-        },
-        ProfileKind::Trapezoidal => SpeedLimits::Trapezoidal {
-            vmax: speed,
-            amax: a.amax,
-        },
+impl PlanProgram {
+    fn push(&mut self, name: impl Into<String>, m: Move) {
+        self.names.push(name.into());
+        self.moves.push(m);
     }
-}
 
-fn circle_path(cx: f64, cy: f64, r: f64, start_deg: f64, ccw: bool, phi: f64) -> Result<Path> {
-    Ok(Path::circle(cx, cy, r, start_deg.to_radians(), ccw, phi)?)
-}
-
-fn square_sides(cx: f64, cy: f64, side: f64, phi: f64) -> Result<Vec<Path>> {
-    if !(side.is_finite() && side > 0.0) {
-        bail!("--side must be a length > 0 mm, got {side}");
-    }
-    let h = side / 2.0;
-    let c = [
-        Pose::new(cx - h, cy - h, phi),
-        Pose::new(cx + h, cy - h, phi),
-        Pose::new(cx + h, cy + h, phi),
-        Pose::new(cx - h, cy + h, phi),
-    ];
-    (0..4)
-        .map(|k| Ok(Path::line(c[k], c[(k + 1) % 4])?))
-        .collect()
-}
-
-/// Builds the motions: approach from `from` to each shape's start, then the shape.
-fn motions(a: &Args, from: Pose) -> Result<Vec<Motion>> {
-    let mut out: Vec<Motion> = Vec::new();
-    let mut at = from;
-    let push = |name: String,
-                path: Path,
-                lim: SpeedLimits,
-                out: &mut Vec<Motion>,
-                at: &mut Pose|
-     -> Result<()> {
-        let start = path.start();
-        if start.max_diff(at) > 1e-9 {
-            let approach = Path::line(*at, start)?;
-            let lim_a = match lim {
-                SpeedLimits::JerkLimited { .. } => lim,
-                SpeedLimits::Trapezoidal { vmax, amax } => SpeedLimits::JerkLimited {
-                    vmax,
-                    amax,
-                    jmax: a.jmax,
-                },
-            };
-            out.push(Motion {
-                name: format!("approach to {name}"),
-                cmd: MotionCommand {
-                    path: approach,
-                    limits: lim_a,
-                },
-            });
+    fn extend(&mut self, moves: Vec<Move>, names: &[&str]) {
+        debug_assert_eq!(moves.len(), names.len());
+        for (m, n) in moves.into_iter().zip(names) {
+            self.push(*n, m);
         }
-        *at = path.end();
-        out.push(Motion {
-            name,
-            cmd: MotionCommand { path, limits: lim },
-        });
-        Ok(())
+    }
+}
+
+/// Largest coordinate difference of two poses (mm, rad).
+fn max_diff(a: &Pose, b: &Pose) -> f64 {
+    (a.x - b.x)
+        .abs()
+        .max((a.y - b.y).abs())
+        .max((a.phi - b.phi).abs())
+}
+
+fn positive(v: f64, what: &str, unit: &str) -> Result<()> {
+    if !(v.is_finite() && v > 0.0) {
+        bail!("{what} must be > 0 {unit}, got {v}");
+    }
+    Ok(())
+}
+
+const CIRCLE_NAMES: [&str; 4] = ["dwell", "circle", "dwell", "return"];
+
+fn square_names() -> Vec<&'static str> {
+    let mut n = vec!["dwell", "approach to square", "dwell"];
+    for s in [
+        "square side 1",
+        "square side 2",
+        "square side 3",
+        "square side 4",
+    ] {
+        n.extend([s, "dwell"]);
+    }
+    n.push("return");
+    n
+}
+
+/// The chain's program of `a` (not of `program` and `joint`, which need the files and the robot).
+fn shape_program(a: &Args, from: Pose) -> Result<PlanProgram> {
+    let mut p = PlanProgram {
+        moves: Vec::new(),
+        names: Vec::new(),
+        start: from,
+        file: None,
     };
-    let prof = |default: ProfileKind| a.profile.unwrap_or(default);
+    let path_limits = |speed: f64, blend_radius: f64| PathLimits {
+        speed,
+        acceleration: a.amax,
+        jerk: a.jmax,
+        blend_radius,
+        rotation_radius: pcr_planner::path::DEFAULT_ROTATION_RADIUS_MM,
+    };
     match &a.shape {
         Shape::Circle {
             radius,
@@ -278,14 +283,45 @@ fn motions(a: &Args, from: Pose) -> Result<Vec<Motion>> {
             start_deg,
             cw,
         } => {
-            let p = circle_path(*cx, *cy, *radius, *start_deg, !cw, phi_deg.to_radians())?;
-            push(
-                "circle".into(),
-                p,
-                limits(prof(ProfileKind::Jerk), *speed, a),
-                &mut out,
-                &mut at,
-            )?;
+            positive(*radius, "--radius", "mm")?;
+            positive(*speed, "--speed", "mm/s")?;
+            let phi = phi_deg.to_radians();
+            if *start_deg == 0.0 && !cw {
+                p.extend(
+                    circle_program([*cx, *cy], *radius, *speed, phi, from),
+                    &CIRCLE_NAMES,
+                );
+            } else {
+                let th = start_deg.to_radians();
+                let p0 = Pose::new(cx + radius * th.cos(), cy + radius * th.sin(), phi);
+                p.push("dwell", Move::Dwell { duration_s: 0.2 });
+                p.push(
+                    "approach to circle",
+                    Move::Line {
+                        to: p0,
+                        speed_mm_s: *speed,
+                    },
+                );
+                p.push(
+                    "circle",
+                    Move::Arc {
+                        centre: [*cx, *cy],
+                        sweep_rad: if *cw { -TAU } else { TAU },
+                        phi: Some(phi),
+                        speed_mm_s: None,
+                        continues: false,
+                        limits: path_limits(*speed, 0.0),
+                    },
+                );
+                p.push("dwell", Move::Dwell { duration_s: 0.2 });
+                p.push(
+                    "return",
+                    Move::Line {
+                        to: from,
+                        speed_mm_s: *speed,
+                    },
+                );
+            }
         }
         Shape::Square {
             side,
@@ -293,111 +329,220 @@ fn motions(a: &Args, from: Pose) -> Result<Vec<Motion>> {
             cx,
             cy,
             phi_deg,
-            ..
+            blend_radius,
         } => {
-            for (k, p) in square_sides(*cx, *cy, *side, phi_deg.to_radians())?
-                .into_iter()
-                .enumerate()
-            {
-                push(
-                    format!("square side {}", k + 1),
-                    p,
-                    limits(prof(ProfileKind::Trapezoidal), *speed, a),
-                    &mut out,
-                    &mut at,
-                )?;
+            positive(*side, "--side", "mm")?;
+            positive(*speed, "--speed", "mm/s")?;
+            let phi = phi_deg.to_radians();
+            match blend_radius {
+                None => p.extend(
+                    square_program([*cx, *cy], *side, *speed, phi, from),
+                    &square_names(),
+                ),
+                Some(r) => {
+                    if !(r.is_finite() && *r >= 0.0) {
+                        bail!("--blend-radius must be a radius >= 0 mm, got {r}");
+                    }
+                    // One composite from --from around the square (starting in the middle of
+                    // its lower side) and back.
+                    let h = side / 2.0;
+                    let start = Pose::new(*cx, cy - h, phi);
+                    let mut pts = Vec::new();
+                    if max_diff(&start, &from) > 1e-9 {
+                        pts.push(("approach to square", start));
+                    }
+                    for (name, x, y) in [
+                        ("square side 1", cx + h, cy - h),
+                        ("square side 2", cx + h, cy + h),
+                        ("square side 3", cx - h, cy + h),
+                        ("square side 4", cx - h, cy - h),
+                        ("square side 1", *cx, cy - h),
+                    ] {
+                        pts.push((name, Pose::new(x, y, phi)));
+                    }
+                    if max_diff(&start, &from) > 1e-9 {
+                        pts.push(("return", from));
+                    }
+                    for (k, (name, to)) in pts.into_iter().enumerate() {
+                        p.push(
+                            name,
+                            Move::PathLine {
+                                to: [to.x, to.y],
+                                phi: Some(to.phi),
+                                speed_mm_s: None,
+                                blend_radius_mm: None,
+                                continues: k > 0,
+                                limits: path_limits(*speed, *r),
+                            },
+                        );
+                    }
+                }
             }
         }
         Shape::Line { to, speed } => {
             let to = parse_pose(to, "--to")?;
-            let p = Path::line(at, to)?;
-            push(
-                "line".into(),
-                p,
-                limits(prof(ProfileKind::Jerk), *speed, a),
-                &mut out,
-                &mut at,
-            )?;
-        }
-        Shape::Paper { speed } => {
-            let p = circle_path(0.0, 0.0, 50.0, 0.0, true, 0.0)?;
-            push(
-                "circle".into(),
-                p,
-                limits(prof(ProfileKind::Jerk), *speed, a),
-                &mut out,
-                &mut at,
-            )?;
-            for (k, p) in square_sides(0.0, 0.0, 50.0, 0.0)?.into_iter().enumerate() {
-                push(
-                    format!("square side {}", k + 1),
-                    p,
-                    limits(prof(ProfileKind::Trapezoidal), *speed, a),
-                    &mut out,
-                    &mut at,
-                )?;
+            positive(*speed, "--speed", "mm/s")?;
+            p.push(
+                "line",
+                Move::Line {
+                    to,
+                    speed_mm_s: *speed,
+                },
+            );
+            if max_diff(&to, &from) > 1e-9 {
+                p.push(
+                    "return",
+                    Move::Line {
+                        to: from,
+                        speed_mm_s: *speed,
+                    },
+                );
             }
         }
+        Shape::Paper { speed } => {
+            positive(*speed, "--speed", "mm/s")?;
+            p.extend(
+                circle_program([0.0, 0.0], 50.0, *speed, 0.0, from),
+                &CIRCLE_NAMES,
+            );
+            p.extend(
+                square_program([0.0, 0.0], 50.0, *speed, 0.0, from),
+                &square_names(),
+            );
+        }
         Shape::Program { .. } | Shape::Joint { .. } => {
-            bail!("programs and joint moves are planned by `run_timeline`")
+            bail!("internal: programs and joint moves are built by `build_program`")
         }
     }
-    // Back to the start pose.
-    if at.max_diff(&from) > 1e-9 {
-        let p = Path::line(at, from)?;
-        let lim = limits(
-            ProfileKind::Jerk,
-            out.last().map_or(50.0, |m| speed_of(&m.cmd.limits)),
-            a,
-        );
-        out.push(Motion {
-            name: "return".into(),
-            cmd: MotionCommand {
-                path: p,
-                limits: lim,
-            },
-        });
-    }
-    Ok(out)
+    Ok(p)
 }
 
-fn speed_of(l: &SpeedLimits) -> f64 {
-    match l {
-        SpeedLimits::JerkLimited { vmax, .. } | SpeedLimits::Trapezoidal { vmax, .. } => *vmax,
-    }
-}
-
-fn kpose(p: &Pose) -> KPose {
-    KPose::new(p.x, p.y, p.phi)
-}
-
-/// Samples every motion every `dt` s and checks it; the first violation names the motion.
-fn check(robot: &Robot, motions: &[Motion], dt: f64, opt: &CheckOptions) -> Result<()> {
-    let mut t0 = 0.0;
-    for m in motions {
-        let profile = SpeedProfile::plan(m.cmd.path.length(), &m.cmd.limits)?;
-        let dur = profile.duration();
-        let n = (dur / dt).ceil().max(1.0) as usize;
-        let samples = (0..=n).map(|k| {
-            let t = (k as f64 * dt).min(dur);
-            let t = if k == n { dur } else { t };
-            (t0 + t, kpose(&m.cmd.path.sample(profile.at(t).p).0))
-        });
-        // Consecutive equal times (a zero-length motion) carry nothing to check.
-        let mut last = f64::NEG_INFINITY;
-        let samples: Vec<_> = samples
-            .filter(|(t, _)| {
-                let keep = *t > last;
-                last = last.max(*t);
-                keep
+/// The chain's program of `pcr plan` with these arguments.
+pub fn build_program(a: &Args, robot: &Robot, from: Pose) -> Result<PlanProgram> {
+    match &a.shape {
+        Shape::Program {
+            file,
+            joint_amax,
+            joint_jmax,
+        } => {
+            let prog = program::load(
+                file,
+                &program::Defaults {
+                    acceleration: a.amax,
+                    jerk: a.jmax,
+                    joint_acceleration: *joint_amax,
+                    joint_jerk: *joint_jmax,
+                },
+            )?;
+            let moves = moves_of_program(&prog);
+            let names = prog
+                .segments
+                .iter()
+                .enumerate()
+                .map(|(i, s)| format!("segment[{i}] ({})", s.kind()))
+                .collect();
+            Ok(PlanProgram {
+                moves,
+                names,
+                start: from,
+                file: Some(file.clone()),
             })
-            .collect();
-        robot
-            .check_motion(samples, opt)
-            .map_err(|e| anyhow::anyhow!("motion rejected in `{}`: {e}", m.name))?;
-        t0 += dur;
+        }
+        Shape::Joint {
+            steps,
+            from_steps,
+            joint_amax,
+            joint_jmax,
+        } => {
+            let target = parse_steps(steps, "--steps")?;
+            let q0 = match from_steps {
+                Some(s) => parse_steps(s, "--from-steps")?,
+                None => {
+                    let s = robot.ik(&Pose::default())?;
+                    let mut q = [0.0; 3];
+                    for i in 0..3 {
+                        q[i] = robot.kappa_to_steps(i, s.kappa[i])?.round();
+                    }
+                    q
+                }
+            };
+            let kappa = std::array::from_fn(|i| robot.steps_to_kappa(i, q0[i]));
+            let start = robot
+                .fk(&kappa)
+                .with_context(|| format!("start steps {q0:?}: no pose in the working mode"))?;
+            Ok(PlanProgram {
+                moves: vec![Move::Joint {
+                    steps: target.map(|q| q as i64),
+                    limits: JointSettings {
+                        acceleration: *joint_amax,
+                        jerk: *joint_jmax,
+                    },
+                }],
+                names: vec!["joint move".into()],
+                start,
+                file: None,
+            })
+        }
+        _ => shape_program(a, from),
     }
-    Ok(())
+}
+
+/// Why the chain refuses the program, naming the move.
+fn refusal(e: CommandError, p: &PlanProgram) -> anyhow::Error {
+    let name = |i: usize| p.names.get(i).map_or("?", |s| s.as_str()).to_string();
+    let file = p.file.as_ref().map_or(String::new(), |f| format!("{f}: "));
+    match e {
+        CommandError::Plan(PlanError::Rejected { index, why }) => {
+            anyhow!("{file}motion rejected in `{}`: {why}", name(index))
+        }
+        CommandError::Plan(PlanError::Invalid { index, why }) => {
+            anyhow!("{file}`{}`: {why}", name(index))
+        }
+        CommandError::Plan(PlanError::InvalidMove { index, what }) => {
+            anyhow!("{file}`{}`: invalid {what}", name(index))
+        }
+        other => anyhow!("{file}{other}"),
+    }
+}
+
+/// The pause, resume and stop requests of `a` as (cycle, command kind), in cycle order.
+fn requests(a: &Args) -> Result<Vec<(usize, u32)>> {
+    let mut r = Vec::new();
+    for (t, kind, what) in [
+        (a.pause_at, command_kind::PAUSE, "--pause-at"),
+        (a.resume_at, command_kind::RESUME, "--resume-at"),
+        (a.stop_at, command_kind::STOP, "--stop-at"),
+    ] {
+        if let Some(t) = t {
+            if !(t.is_finite() && t >= 0.0) {
+                bail!("{what} must be a time >= 0 s, got {t}");
+            }
+            r.push(((t / CYCLE_S).round() as usize, kind));
+        }
+    }
+    r.sort_by_key(|&(k, _)| k);
+    Ok(r)
+}
+
+/// Plans `p` with the chain's planner and interpolator ([`plan_moves`]): every 20 ms cycle from
+/// t = 0 to rest, with the requests `commands` (cycle, PAUSE/RESUME/STOP). Also returns the
+/// composite speed limit of each cycle (NaN outside composites).
+pub fn plan_cycles(
+    robot: &Robot,
+    limits: MotionLimits,
+    check: CheckOptions,
+    p: &PlanProgram,
+    commands: &[(usize, u32)],
+) -> Result<(Vec<PlannedCycle>, Vec<f64>)> {
+    let source = PlannerSource::new(robot.clone(), limits).with_check_options(check);
+    let plan =
+        plan_moves(source, p.start, &p.moves, commands, CYCLE_S).map_err(|e| refusal(e, p))?;
+    let lim = plan
+        .cycles
+        .iter()
+        .map(|c| plan.interp.source().speed_limit_at(c.progress_s))
+        .collect();
+    Ok((plan.cycles, lim))
 }
 
 /// One 20 ms row of the plan.
@@ -414,36 +559,25 @@ pub fn run(a: Args) -> Result<()> {
     let (cfg, robot_name) = crate::robot_arg::load(a.robot.as_deref())?;
     let robot = Robot::new(&cfg).with_context(|| format!("robot {robot_name}"))?;
     let from = parse_pose(&a.from, "--from")?;
-    if matches!(
-        a.shape,
-        Shape::Program { .. }
-            | Shape::Joint { .. }
-            | Shape::Square {
-                blend_radius: Some(_),
-                ..
-            }
-    ) {
-        return run_timeline(&a, &cfg, &robot, from);
-    }
-    let motions = motions(&a, from)?;
-    let opt = CheckOptions {
+    let check = CheckOptions {
         singularity_margin: a.singularity_margin,
         rate_fraction: a.rate_fraction,
     };
-    check(&robot, &motions, 0.002, &opt)?;
-    let mut interp = Interpolator::new(from, a.amax, a.jmax)?;
-    for m in &motions {
-        interp
-            .push(m.cmd)
-            .with_context(|| format!("cannot queue `{}`", m.name))?;
-    }
-    let mut rows = Vec::new();
-    let mut pose = from;
-    let mut t = 0.0;
-    let mut speed = 0.0;
-    loop {
-        let s = robot.ik(&kpose(&pose)).with_context(|| {
-            format!("t = {t:.2} s: the interpolated pose {pose:?} has no IK solution")
+    let prog = build_program(&a, &robot, from)?;
+    let commands = requests(&a)?;
+    let limits = MotionLimits {
+        amax: a.amax,
+        jmax: a.jmax,
+    };
+    positive(a.amax, "--amax", "mm/s^2")?;
+    positive(a.jmax, "--jmax", "mm/s^3")?;
+    let (cycles, speed_limits) = plan_cycles(&robot, limits, check, &prog, &commands)?;
+    let mut rows = Vec::with_capacity(cycles.len());
+    for c in &cycles {
+        let pose = c.pose();
+        let t = c.task.t_s;
+        let s = robot.ik(&pose).with_context(|| {
+            format!("t = {t:.2} s: the planned pose {pose:?} has no IK solution")
         })?;
         let mut q = [0i64; 3];
         for i in 0..3 {
@@ -452,32 +586,10 @@ pub fn run(a: Args) -> Result<()> {
         rows.push(Row {
             t,
             pose,
-            speed,
+            speed: c.speed_mm_s,
             kappa: s.kappa,
             q,
         });
-        if interp.is_idle() && rows.len() > 1 {
-            break;
-        }
-        let sp = interp.step();
-        t = sp.t;
-        pose = sp.pose;
-        speed = sp.speed;
-        if sp.phase == Phase::Idle && interp.is_idle() {
-            let s = robot.ik(&kpose(&pose))?;
-            let mut q = [0i64; 3];
-            for i in 0..3 {
-                q[i] = robot.kappa_to_steps(i, s.kappa[i])?.round() as i64;
-            }
-            rows.push(Row {
-                t,
-                pose,
-                speed,
-                kappa: s.kappa,
-                q,
-            });
-            break;
-        }
     }
     write_csv(a.output.as_deref(), &rows)?;
     let max_rate: Vec<f64> = (0..3)
@@ -488,8 +600,8 @@ pub fn run(a: Args) -> Result<()> {
         })
         .collect();
     eprintln!(
-        "plan: {} motions, {:.2} s, {} setpoints every {:.0} ms; max step rate per motor {:.0} / {:.0} / {:.0} steps/s (limit {:.0})",
-        motions.len(),
+        "plan: {} moves, {:.2} s, {} setpoints every {:.0} ms; max step rate per motor {:.0} / {:.0} / {:.0} steps/s (limit {:.0})",
+        prog.moves.len(),
         rows.last().map_or(0.0, |r| r.t),
         rows.len(),
         CYCLE_S * 1e3,
@@ -499,13 +611,14 @@ pub fn run(a: Args) -> Result<()> {
         robot.legs[0].max_step_rate
     );
     if let Some(svg) = &a.svg {
-        crate::figures_plan::plan_svg(
+        crate::figures_plan::plan_svg_with_limit(
             svg,
             &robot,
             &rows
                 .iter()
                 .map(|r| (r.t, r.pose.x, r.pose.y, r.speed))
                 .collect::<Vec<_>>(),
+            &speed_limits,
         )?;
     }
     Ok(())
@@ -539,39 +652,6 @@ fn write_csv(path: Option<&str>, rows: &[Row]) -> Result<()> {
     Ok(())
 }
 
-/// What one item of a program's timeline does.
-enum ItemKind {
-    /// A composite path motion.
-    Path { motion: Box<CompositeMotion> },
-    /// Holding a pose.
-    Dwell { pose: Pose },
-    /// A synchronised joint move.
-    Joint { mv: Box<JointMove> },
-}
-
-/// One item of a program's timeline.
-struct Item {
-    t0: f64,
-    duration: f64,
-    kind: ItemKind,
-}
-
-fn to_pose(p: &KPose) -> Pose {
-    Pose::new(p.x, p.y, p.phi)
-}
-
-/// Motor steps (not rounded) of a pose in the working mode.
-fn steps_of_pose(robot: &Robot, pose: &Pose) -> Result<[f64; 3]> {
-    let s = robot
-        .ik(&kpose(pose))
-        .with_context(|| format!("pose {pose:?} has no IK solution"))?;
-    let mut q = [0.0; 3];
-    for i in 0..3 {
-        q[i] = robot.kappa_to_steps(i, s.kappa[i])?;
-    }
-    Ok(q)
-}
-
 fn parse_steps(s: &str, what: &str) -> Result<[f64; 3]> {
     let v: Vec<i64> = s
         .split(',')
@@ -584,458 +664,68 @@ fn parse_steps(s: &str, what: &str) -> Result<[f64; 3]> {
     Ok([v[0] as f64, v[1] as f64, v[2] as f64])
 }
 
-/// Builds and checks the timeline of a program.
-struct Timeline<'a> {
-    robot: &'a Robot,
-    opt: CheckOptions,
-    file: String,
-    items: Vec<Item>,
-    t: f64,
-    pose: Pose,
-    /// Exact motor positions after a joint move (None after a path: from IK).
-    steps: Option<[f64; 3]>,
-    joint: JointLimits,
-}
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+    use pcr_control::{paper_circle, paper_program, paper_square};
 
-fn composite_error(e: &CompositeError) -> String {
-    match e {
-        CompositeError::ZeroLength { .. } => "it ends where it starts (no length)".into(),
-        CompositeError::ZeroRadius { .. } => "the centre is at the start point (radius 0)".into(),
-        other => other.to_string(),
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        a: Args,
     }
-}
 
-impl Timeline<'_> {
-    /// Plans and checks consecutive lines and arcs (`(program index, step)`) as one composite.
-    fn path(&mut self, steps: &[(usize, program::Step)], lim: &program::PathLimits) -> Result<()> {
-        use program::Step;
-        if steps.is_empty() {
-            return Ok(());
-        }
-        let file = &self.file;
-        let mut path = CompositePath::with_rotation_radius(self.pose, lim.rotation_radius)?;
-        for (idx, st) in steps {
-            let at = |e: CompositeError| {
-                anyhow!(
-                    "{file}: segment[{idx}] ({}): {}",
-                    st.kind(),
-                    if matches!(e, CompositeError::TooManySegments) {
-                        e.to_string()
-                    } else {
-                        composite_error(&e)
-                    }
-                )
-            };
-            match *st {
-                Step::Line { to, phi, speed, .. } => {
-                    let phi = phi.unwrap_or(path.end().phi);
-                    path.line_to(Pose::new(to[0], to[1], phi), speed)
-                        .map_err(at)?
-                }
-                Step::Arc {
-                    center,
-                    sweep,
-                    phi,
-                    speed,
-                } => {
-                    let phi = phi.unwrap_or(path.end().phi);
-                    path.arc_around(center[0], center[1], sweep, phi, speed)
-                        .map_err(at)?
-                }
-                _ => bail!("internal: only lines and arcs form a path"),
-            }
-        }
-        // Junction j joins primitives j - 1 and j; a line's own radius rounds the corner at
-        // its end.
-        let path = path
-            .blend_corners(|j| match steps[j - 1].1 {
-                Step::Line {
-                    blend_radius: Some(r),
-                    ..
-                } => r,
-                _ => lim.blend_radius,
-            })
-            .map_err(|e| {
-                anyhow!(
-                    "{file}: segments[{}..={}]: {e}",
-                    steps[0].0,
-                    steps[steps.len() - 1].0
-                )
-            })?;
-        let names: Vec<String> = path
-            .segments()
-            .iter()
-            .map(|s| match s.source() {
-                SegmentSource::Primitive(k) => {
-                    format!("segment[{}] ({})", steps[k].0, steps[k].1.kind())
-                }
-                SegmentSource::Blend(k) => format!("corner blend after segment[{}]", steps[k].0),
-            })
-            .collect();
-        let motion = CompositeMotion::plan(
-            &path,
-            &CompositeLimits {
-                vmax: lim.speed,
-                amax: lim.acceleration,
-                jmax: lim.jerk,
-            },
+    fn program_of(args: &[&str]) -> PlanProgram {
+        let cli = Cli::try_parse_from(std::iter::once("plan").chain(args.iter().copied()))
+            .unwrap_or_else(|e| panic!("{e}"));
+        build_program(&cli.a, &Robot::nominal(), Pose::default()).unwrap()
+    }
+
+    #[test]
+    fn the_papers_shapes_are_the_chains_built_in_programs() {
+        let c = program_of(&["circle", "--radius", "50", "--speed", "50"]);
+        assert_eq!(c.moves, paper_circle());
+        assert_eq!(c.names.len(), c.moves.len());
+        let s = program_of(&["square", "--side", "50", "--speed", "50"]);
+        assert_eq!(s.moves, paper_square());
+        assert_eq!(s.names.len(), s.moves.len());
+        let p = program_of(&["paper"]);
+        assert_eq!(p.moves, paper_program());
+        assert_eq!(p.names.len(), p.moves.len());
+    }
+
+    #[test]
+    fn stop_requests_are_cycles_of_the_chain() {
+        let cli = Cli::try_parse_from([
+            "plan",
+            "circle",
+            "--radius",
+            "50",
+            "--speed",
+            "50",
+            "--stop-at",
+            "3.001",
+            "--pause-at",
+            "1",
+        ])
+        .unwrap();
+        assert_eq!(
+            requests(&cli.a).unwrap(),
+            [(50, command_kind::PAUSE), (150, command_kind::STOP)]
+        );
+        let p = build_program(&cli.a, &Robot::nominal(), Pose::default()).unwrap();
+        let (cycles, lim) = plan_cycles(
+            &Robot::nominal(),
+            MotionLimits::default(),
+            CheckOptions::default(),
+            &p,
+            &requests(&cli.a).unwrap(),
         )
-        .map_err(|e| {
-            anyhow!(
-                "{file}: segments[{}..={}]: {e}",
-                steps[0].0,
-                steps[steps.len() - 1].0
-            )
-        })?;
-        // Check every 2 ms (and at the end).
-        let dur = motion.duration();
-        let dt = 0.002;
-        let n = (dur / dt).ceil().max(1.0) as usize;
-        let t0 = self.t;
-        let samples = (0..=n).map(|k| {
-            let t = if k == n { dur } else { k as f64 * dt };
-            (t0 + t, kpose(&motion.sample(t).pose))
-        });
-        let mut last = f64::NEG_INFINITY;
-        let samples: Vec<_> = samples
-            .filter(|(t, _)| {
-                let keep = *t > last;
-                last = last.max(*t);
-                keep
-            })
-            .collect();
-        if let Err(e) = self.robot.check_motion(samples, &self.opt) {
-            let seg = motion.sample(e.t - t0).segment;
-            bail!("motion rejected in `{}`: {e}", names[seg]);
-        }
-        self.pose = path.end();
-        self.steps = None;
-        self.t += dur;
-        self.items.push(Item {
-            t0,
-            duration: dur,
-            kind: ItemKind::Path {
-                motion: Box::new(motion),
-            },
-        });
-        Ok(())
+        .unwrap();
+        assert_eq!(cycles.len(), lim.len());
+        // paused at rest (the stop while paused ends it at once)
+        assert_eq!(cycles[150].state, pcr_messages::planner_state::STOPPED);
+        assert_eq!(cycles.len(), 151);
     }
-
-    fn dwell(&mut self, seconds: f64) {
-        self.items.push(Item {
-            t0: self.t,
-            duration: seconds,
-            kind: ItemKind::Dwell { pose: self.pose },
-        });
-        self.t += seconds;
-    }
-
-    /// Plans and checks a joint move to `target` steps; `name` names it in messages.
-    fn joint(&mut self, name: &str, target: [f64; 3]) -> Result<()> {
-        let from = match self.steps {
-            Some(s) => s,
-            None => steps_of_pose(self.robot, &self.pose)?,
-        };
-        let mv =
-            JointMove::plan(from, target, &self.joint).map_err(|e| anyhow!("`{name}`: {e}"))?;
-        let t0 = self.t;
-        let samples = mv
-            .check(self.robot, 0.002, &kpose(&self.pose), &self.opt)
-            .map_err(|e| {
-                // Times in the program, not in the move.
-                let e = match e {
-                    JointError::Rejected(mut r) => {
-                        r.t += t0;
-                        JointError::Rejected(r)
-                    }
-                    JointError::Fk { t, q, why } => JointError::Fk { t: t + t0, q, why },
-                    other => other,
-                };
-                anyhow!("motion rejected in `{name}`: {e}")
-            })?;
-        if let Some((_, p)) = samples.last() {
-            self.pose = to_pose(p);
-        }
-        self.steps = Some(target);
-        self.t += mv.duration();
-        self.items.push(Item {
-            t0,
-            duration: mv.duration(),
-            kind: ItemKind::Joint { mv: Box::new(mv) },
-        });
-        Ok(())
-    }
-}
-
-/// Combined-metric distance of two poses, mm.
-fn metric(a: &Pose, b: &Pose, r: f64) -> f64 {
-    ((a.x - b.x).powi(2) + (a.y - b.y).powi(2) + (r * (a.phi - b.phi)).powi(2)).sqrt()
-}
-
-/// Samples the timeline every 20 ms: rows, and the path speed limit per row (NaN outside paths).
-fn timeline_rows(
-    robot: &Robot,
-    items: &[Item],
-    start: Pose,
-    rot_radius: f64,
-) -> Result<(Vec<Row>, Vec<f64>)> {
-    let total = items.last().map_or(0.0, |i| i.t0 + i.duration);
-    let n = ((total / CYCLE_S) - 1e-9).ceil().max(1.0) as usize;
-    let mut rows = Vec::with_capacity(n + 1);
-    let mut limits = Vec::with_capacity(n + 1);
-    let mut guess = kpose(&start);
-    for k in 0..=n {
-        let t = k as f64 * CYCLE_S;
-        let item = items.iter().rev().find(|i| i.t0 <= t + 1e-12);
-        let (pose, speed, kappa, q, limit) = match item {
-            None => {
-                let q = steps_of_pose(robot, &start)?;
-                let s = robot.ik(&kpose(&start))?;
-                (start, 0.0, s.kappa, q, f64::NAN)
-            }
-            Some(item) => {
-                let local = t - item.t0;
-                match &item.kind {
-                    ItemKind::Path { motion, .. } => {
-                        let sp = motion.sample(local);
-                        let s = robot.ik(&kpose(&sp.pose)).with_context(|| {
-                            format!("t = {t:.2} s: the planned pose {:?} has no IK", sp.pose)
-                        })?;
-                        let mut q = [0.0; 3];
-                        for i in 0..3 {
-                            q[i] = robot.kappa_to_steps(i, s.kappa[i])?;
-                        }
-                        let limit = if local < motion.duration() {
-                            motion.segment_speed_limit(sp.segment)
-                        } else {
-                            f64::NAN
-                        };
-                        (sp.pose, sp.speed, s.kappa, q, limit)
-                    }
-                    ItemKind::Dwell { pose } => {
-                        let s = robot.ik(&kpose(pose))?;
-                        (*pose, 0.0, s.kappa, steps_of_pose(robot, pose)?, f64::NAN)
-                    }
-                    ItemKind::Joint { mv } => {
-                        let q = mv.sample(local).q;
-                        let kappa = std::array::from_fn(|i| robot.steps_to_kappa(i, q[i]));
-                        let p = JointMove::pose_of(robot, &q, &guess)
-                            .with_context(|| format!("t = {t:.2} s: no FK for steps {q:?}"))?;
-                        let speed = if local < mv.duration() {
-                            let h = 1e-3;
-                            let q2 = mv.sample(local + h).q;
-                            let p2 = JointMove::pose_of(robot, &q2, &p)?;
-                            metric(&to_pose(&p), &to_pose(&p2), rot_radius) / h
-                        } else {
-                            0.0
-                        };
-                        (to_pose(&p), speed, kappa, q, f64::NAN)
-                    }
-                }
-            }
-        };
-        guess = kpose(&pose);
-        rows.push(Row {
-            t,
-            pose,
-            speed,
-            kappa,
-            q: std::array::from_fn(|i| q[i].round() as i64),
-        });
-        limits.push(limit);
-    }
-    Ok((rows, limits))
-}
-
-/// Joint limits for planning: the configuration's step rates times `rate_fraction`, reduced by
-/// 1e-6 relative so that the FK/IK round trip of the check never sees a rate above the limit.
-fn joint_limits(
-    cfg: &RobotConfig,
-    rate_fraction: f64,
-    amax: f64,
-    jmax: f64,
-) -> Result<JointLimits> {
-    let mut l = JointLimits::from_config(cfg, rate_fraction, amax, jmax)?;
-    for r in &mut l.rate {
-        *r *= 1.0 - 1e-6;
-    }
-    Ok(l)
-}
-
-/// `pcr plan program` and `pcr plan joint`.
-fn run_timeline(a: &Args, cfg: &RobotConfig, robot: &Robot, from: Pose) -> Result<()> {
-    let opt = CheckOptions {
-        singularity_margin: a.singularity_margin,
-        rate_fraction: a.rate_fraction,
-    };
-    let mut tl = Timeline {
-        robot,
-        opt,
-        file: String::new(),
-        items: Vec::new(),
-        t: 0.0,
-        pose: from,
-        steps: None,
-        joint: joint_limits(cfg, a.rate_fraction, DEFAULT_JOINT_AMAX, DEFAULT_JOINT_JMAX)?,
-    };
-    let mut rot_radius = pcr_planner::path::DEFAULT_ROTATION_RADIUS_MM;
-    let mut start = from;
-    match &a.shape {
-        Shape::Program {
-            file,
-            joint_amax,
-            joint_jmax,
-        } => {
-            let prog = program::load(
-                file,
-                &program::Defaults {
-                    acceleration: a.amax,
-                    jerk: a.jmax,
-                    joint_acceleration: *joint_amax,
-                    joint_jerk: *joint_jmax,
-                },
-            )?;
-            tl.file = file.clone();
-            tl.joint = joint_limits(
-                cfg,
-                a.rate_fraction,
-                prog.joint.acceleration,
-                prog.joint.jerk,
-            )
-            .with_context(|| format!("{file}: joint_limits"))?;
-            rot_radius = prog.limits.rotation_radius;
-            let mut pending: Vec<(usize, program::Step)> = Vec::new();
-            for (i, st) in prog.segments.iter().enumerate() {
-                match *st {
-                    program::Step::Line { .. } | program::Step::Arc { .. } => {
-                        pending.push((i, *st));
-                        continue;
-                    }
-                    _ => {}
-                }
-                tl.path(&pending, &prog.limits)?;
-                pending.clear();
-                match *st {
-                    program::Step::Dwell { seconds } => tl.dwell(seconds),
-                    program::Step::Joint { steps } => tl.joint(
-                        &format!("segment[{i}] (joint)"),
-                        std::array::from_fn(|k| steps[k] as f64),
-                    )?,
-                    _ => {}
-                }
-            }
-            tl.path(&pending, &prog.limits)?;
-        }
-        Shape::Joint {
-            steps,
-            from_steps,
-            joint_amax,
-            joint_jmax,
-        } => {
-            let target = parse_steps(steps, "--steps")?;
-            tl.joint = joint_limits(cfg, a.rate_fraction, *joint_amax, *joint_jmax)?;
-            let q0 = match from_steps {
-                Some(s) => parse_steps(s, "--from-steps")?,
-                None => {
-                    let q = steps_of_pose(robot, &Pose::default())?;
-                    q.map(f64::round)
-                }
-            };
-            let kappa = std::array::from_fn(|i| robot.steps_to_kappa(i, q0[i]));
-            let p0 = robot
-                .fk(&kappa)
-                .with_context(|| format!("start steps {q0:?}: no pose in the working mode"))?;
-            start = to_pose(&p0);
-            tl.pose = start;
-            tl.steps = Some(q0);
-            tl.joint("joint move", target)?;
-        }
-        Shape::Square {
-            side,
-            speed,
-            cx,
-            cy,
-            phi_deg,
-            blend_radius: Some(r),
-        } => {
-            if !(side.is_finite() && *side > 0.0) {
-                bail!("--side must be a length > 0 mm, got {side}");
-            }
-            if !(r.is_finite() && *r >= 0.0) {
-                bail!("--blend-radius must be a radius >= 0 mm, got {r}");
-            }
-            if !(speed.is_finite() && *speed > 0.0) {
-                bail!("--speed must be > 0 mm/s, got {speed}");
-            }
-            let (h, phi) = (side / 2.0, phi_deg.to_radians());
-            let line = |x: f64, y: f64, phi: f64| program::Step::Line {
-                to: [x, y],
-                phi: Some(phi),
-                speed: None,
-                blend_radius: None,
-            };
-            let mut steps = Vec::new();
-            let start = Pose::new(*cx, cy - h, phi);
-            if start.max_diff(&from) > 1e-9 {
-                steps.push(line(start.x, start.y, phi));
-            }
-            for (x, y) in [
-                (cx + h, cy - h),
-                (cx + h, cy + h),
-                (cx - h, cy + h),
-                (cx - h, cy - h),
-                (*cx, cy - h),
-            ] {
-                steps.push(line(x, y, phi));
-            }
-            if start.max_diff(&from) > 1e-9 {
-                steps.push(line(from.x, from.y, from.phi));
-            }
-            let steps: Vec<_> = steps.into_iter().enumerate().collect();
-            tl.file = "square".into();
-            tl.path(
-                &steps,
-                &program::PathLimits {
-                    speed: *speed,
-                    acceleration: a.amax,
-                    jerk: a.jmax,
-                    blend_radius: *r,
-                    rotation_radius: rot_radius,
-                },
-            )?;
-        }
-        _ => bail!("internal: not a program, joint move or blended square"),
-    }
-    let (rows, limits) = timeline_rows(robot, &tl.items, start, rot_radius)?;
-    write_csv(a.output.as_deref(), &rows)?;
-    let max_rate: Vec<f64> = (0..3)
-        .map(|i| {
-            rows.windows(2)
-                .map(|w| (w[1].q[i] - w[0].q[i]).abs() as f64 / (w[1].t - w[0].t))
-                .fold(0.0, f64::max)
-        })
-        .collect();
-    eprintln!(
-        "plan: {} motions, {:.2} s, {} setpoints every {:.0} ms; max step rate per motor {:.0} / {:.0} / {:.0} steps/s (limit {:.0})",
-        tl.items.len(),
-        rows.last().map_or(0.0, |r| r.t),
-        rows.len(),
-        CYCLE_S * 1e3,
-        max_rate[0],
-        max_rate[1],
-        max_rate[2],
-        robot.legs[0].max_step_rate
-    );
-    if let Some(svg) = &a.svg {
-        crate::figures_plan::plan_svg_with_limit(
-            svg,
-            robot,
-            &rows
-                .iter()
-                .map(|r| (r.t, r.pose.x, r.pose.y, r.speed))
-                .collect::<Vec<_>>(),
-            &limits,
-        )?;
-    }
-    Ok(())
 }

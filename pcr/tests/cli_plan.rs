@@ -368,3 +368,43 @@ fn a_blended_square_keeps_moving_through_its_corners() {
     ]);
     assert!(String::from_utf8_lossy(&o.stderr).contains("--blend-radius"));
 }
+
+#[test]
+fn a_stop_request_brakes_along_the_circle_as_the_chain_does() {
+    let d = tempfile::tempdir().unwrap();
+    let (full, stopped) = (d.path().join("full.csv"), d.path().join("stop.csv"));
+    for (out, extra) in [(&full, None), (&stopped, Some("3"))] {
+        let mut args = vec![
+            "plan",
+            "circle",
+            "--radius",
+            "50",
+            "--speed",
+            "50",
+            "--output",
+            out.to_str().unwrap(),
+        ];
+        if let Some(t) = extra {
+            args.extend(["--stop-at", t]);
+        }
+        let o = pcr(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let (_, a) = read_rows(&full);
+    let (_, b) = read_rows(&stopped);
+    // the same cycles up to the request, then braking on the circle to rest
+    assert!(b.len() < a.len() - 100, "{} of {}", b.len(), a.len());
+    assert_eq!(a[..150], b[..150]);
+    let after: Vec<_> = b[150..].iter().collect();
+    assert!(after.len() > 5, "stopped at once");
+    for r in &after {
+        assert!(
+            ((r[1] * r[1] + r[2] * r[2]).sqrt() - 50.0).abs() < 1e-6,
+            "{r:?}"
+        );
+    }
+    for w in after.windows(2) {
+        assert!(w[1][4] <= w[0][4] + 1e-9, "speeds up while braking: {w:?}");
+    }
+    assert_eq!(b.last().unwrap()[4], 0.0);
+}
