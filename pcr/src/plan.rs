@@ -32,7 +32,6 @@ use pcr_control::{
 use pcr_kinematics::{CheckOptions, Pose, Robot};
 use pcr_messages::command_kind;
 use pcr_planner::program::{self, JointSettings, PathLimits};
-use pcr_robot::RobotConfig;
 use std::f64::consts::TAU;
 
 /// Arguments of `pcr plan`.
