@@ -305,8 +305,10 @@ fn bench_iceoryx2_in(a: &Args, period_ns: u64, prefix: &str) -> Result<(Hists, u
             if !planner_busy {
                 run_id += 1;
                 planner_busy = true;
-                let _ =
-                    pub_cmd.send_copy(simple_command(command_kind::RUN, program_id::PAPER, run_id));
+                let _ = pcr_nodes::publish(
+                    &pub_cmd,
+                    simple_command(command_kind::RUN, program_id::PAPER, run_id),
+                );
             }
             if start.elapsed()
                 > Duration::from_secs(30) + Duration::from_nanos(period_ns * a.cycles * 3)

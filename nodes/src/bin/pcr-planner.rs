@@ -19,7 +19,8 @@ use pcr_messages::{
     command_kind, driver_flags, monotonic_ns, planner_state, services as s, Command, Correction,
     DriverStateMsg, Heartbeat, NodeKind, PlannerStatus, TaskSetpoint,
 };
-use pcr_nodes::{chain_time_s, ports::latest, CommonArgs, CycleStats, PeriodicTimer};
+use pcr_nodes::cycle::planner_emit;
+use pcr_nodes::{chain_time_s, ports::latest, publish, CommonArgs, CycleStats, PeriodicTimer};
 use pcr_robot::RobotConfig;
 use std::sync::{mpsc, Arc, Mutex};
 
@@ -273,20 +274,17 @@ fn run(a: Args) -> Result<()> {
                 auto_paused = false;
                 tracing::info!("drive following again: program resumed");
             }
-            let mut sp = interp.step(t);
-            sp.stamps.interp_pub_ns = monotonic_ns();
-            let _ = pub_sp.send_copy(sp);
-            let _ = notify.notify();
+            planner_emit(&mut interp, t, &pub_sp, &notify);
             let status = planning_status(interp.status(t), planning);
             if status.state != last_state {
                 last_state = status.state;
-                let _ = pub_status.send_copy(status);
+                let _ = publish(&pub_status, status);
             }
             stats.record(monotonic_ns() - wake, latency);
         }
         if id.has_event_from(&hb) {
-            let _ = pub_hb.send_copy(stats.heartbeat(false));
-            let _ = pub_status.send_copy(planning_status(interp.status(t), planning));
+            let _ = publish(&pub_hb, stats.heartbeat(false));
+            let _ = publish(&pub_status, planning_status(interp.status(t), planning));
             pcr_nodes::recheck(&guard);
         }
         CallbackProgression::Continue
