@@ -7,6 +7,7 @@
 //! exits cleanly, releasing its shared memory.
 
 pub mod args;
+pub mod cycle;
 pub mod ports;
 pub mod protocol;
 pub mod realtime;
@@ -14,7 +15,7 @@ pub mod stats;
 pub mod timer;
 
 pub use args::CommonArgs;
-pub use ports::{iox_config, ChainNode};
+pub use ports::{iox_config, publish, ChainNode};
 pub use protocol::ProtocolGuard;
 pub use stats::CycleStats;
 pub use timer::{PeriodicTimer, Tick};

@@ -6,6 +6,7 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::port::SendError;
 use iceoryx2::prelude::*;
 use pcr_messages::service_name_for;
 use std::fmt::Debug;
@@ -154,6 +155,19 @@ impl ChainNode {
             .create()
             .map_err(|e| anyhow!("cannot create listener on {base}: {e:?}"))
     }
+}
+
+/// Publishes `value` without a copy through an intermediate buffer: loans a sample in the
+/// service's shared-memory data segment, writes the value into it in place and sends it (the
+/// subscribers receive the offset of that very sample). The error is `Publisher::send_copy`'s,
+/// so call sites keep their error handling.
+#[inline]
+pub fn publish<T: Debug + ZeroCopySend + 'static>(
+    publisher: &Publisher<ipc::Service, T, ()>,
+    value: T,
+) -> Result<usize, SendError> {
+    let sample = publisher.loan_uninit()?;
+    sample.write_payload(value).send()
 }
 
 /// Drains a subscriber, keeping the newest sample (copied out).

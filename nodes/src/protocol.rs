@@ -57,7 +57,7 @@ impl ProtocolGuard {
 
     /// Announces this process (call every heartbeat).
     pub fn announce(&self) {
-        let _ = self.publisher.send_copy(self.me);
+        let _ = crate::ports::publish(&self.publisher, self.me);
     }
 
     /// Drains the announcements heard so far. The supervisor's version is the reference: a

@@ -548,9 +548,10 @@ impl Supervisor {
                         "pcr-supervisor: run {} paused while {name} restarts",
                         run.id
                     );
-                    let _ = self
-                        .pub_cmd
-                        .send_copy(simple_command(command_kind::PAUSE, 0, run.id));
+                    let _ = pcr_nodes::publish(
+                        &self.pub_cmd,
+                        simple_command(command_kind::PAUSE, 0, run.id),
+                    );
                 }
             }
         }
@@ -562,9 +563,7 @@ impl Supervisor {
             return;
         }
         eprintln!("pcr-supervisor: SAFE STOP: {why}");
-        let _ = self
-            .pub_cmd
-            .send_copy(simple_command(command_kind::STOP, 0, 0));
+        let _ = pcr_nodes::publish(&self.pub_cmd, simple_command(command_kind::STOP, 0, 0));
         if let Some(run) = &mut self.run {
             if run.ended.is_none() {
                 run.ended = Some((Instant::now(), "safe stop"));
@@ -744,9 +743,7 @@ impl Supervisor {
             }
             x
         });
-        self.pub_cmd
-            .send_copy(cmd)
-            .map_err(|e| format!("command: {e:?}"))?;
+        pcr_nodes::publish(&self.pub_cmd, cmd).map_err(|e| format!("command: {e:?}"))?;
         eprintln!(
             "pcr-supervisor: run {id} ({name}) started, recording {}",
             path.display()
@@ -824,7 +821,7 @@ impl Supervisor {
                         r.ended = Some((Instant::now(), "stopped"));
                     }
                 }
-                match self.pub_cmd.send_copy(simple_command(k, 0, run_id)) {
+                match pcr_nodes::publish(&self.pub_cmd, simple_command(k, 0, run_id)) {
                     Ok(_) => word.into(),
                     Err(e) => format!("error: {e:?}"),
                 }
@@ -1068,15 +1065,16 @@ impl Supervisor {
                     "pcr-supervisor: run {} recovering near {:.2} s of the program",
                     run.id, run.progress_s
                 );
-                let _ = self.pub_cmd.send_copy(c);
+                let _ = pcr_nodes::publish(&self.pub_cmd, c);
             }
             if run.ended.is_none() && run.paused_by_supervisor && run.recover.is_none() && healthy {
                 run.paused_by_supervisor = false;
                 if !run.user_paused {
                     eprintln!("pcr-supervisor: run {} resumed", run.id);
-                    let _ = self
-                        .pub_cmd
-                        .send_copy(simple_command(command_kind::RESUME, 0, run.id));
+                    let _ = pcr_nodes::publish(
+                        &self.pub_cmd,
+                        simple_command(command_kind::RESUME, 0, run.id),
+                    );
                 }
             }
         }
@@ -1124,9 +1122,7 @@ impl Supervisor {
             run.record_pending(&self.mocap, c, now, false);
         }
         if stop {
-            let _ = self
-                .pub_cmd
-                .send_copy(simple_command(command_kind::STOP, 0, 0));
+            let _ = pcr_nodes::publish(&self.pub_cmd, simple_command(command_kind::STOP, 0, 0));
         }
         // Refusals (before the status that reports the run refused).
         while let Ok(Some(smp)) = self.sub_refusal.receive() {
@@ -1207,7 +1203,7 @@ impl Supervisor {
                                     x.awaiting_start = true;
                                     run.cmd = c;
                                     run.started = now;
-                                    if let Err(e) = self.pub_cmd.send_copy(c) {
+                                    if let Err(e) = pcr_nodes::publish(&self.pub_cmd, c) {
                                         run.ended = Some((now, "aborted (command not sent)"));
                                         eprintln!("pcr-supervisor: run {}: {e:?}", run.id);
                                     }
@@ -1357,9 +1353,7 @@ impl Supervisor {
     /// Stops every child (SIGTERM, then SIGKILL after 3 s), cleans up dead nodes' resources and
     /// the control socket.
     fn shutdown(&mut self) {
-        let _ = self
-            .pub_cmd
-            .send_copy(simple_command(command_kind::STOP, 0, 0));
+        let _ = pcr_nodes::publish(&self.pub_cmd, simple_command(command_kind::STOP, 0, 0));
         if let Some(r) = &mut self.run {
             if r.ended.is_none() {
                 r.ended = Some((Instant::now(), "interrupted"));

@@ -44,9 +44,15 @@ struct Args {
     /// Robot configuration.
     #[arg(long, default_value = "configs/robot.toml")]
     robot: String,
-    /// SCHED_FIFO priority for every process of both transports (0 = normal scheduling).
+    /// SCHED_FIFO priority of the driver of both transports (0 = normal scheduling); the IK runs
+    /// `--priority-step` below it and the planner (the UDS baseline's interpolator and collector)
+    /// twice that below, as `configs/sim.toml` places them (80, 75, 70).
     #[arg(long, default_value_t = 0)]
     rt_priority: i32,
+    /// Priority step between the chain's stages (downstream higher, so that a woken stage
+    /// preempts the one that woke it); 0 = every process at `--rt-priority`.
+    #[arg(long, default_value_t = 5)]
+    priority_step: i32,
     /// Pin every chain process of both transports to this CPU (as configs/sim.toml does).
     #[arg(long)]
     cpu: Option<usize>,
@@ -60,6 +66,13 @@ struct Args {
     /// Skip the UDS baseline.
     #[arg(long)]
     no_uds: bool,
+    /// Instead of the chain: profile the user-space parts of one hop, this many times per
+    /// transport, in one process (publish, notify, WaitSet wake-up, event drain, receive vs the
+    /// socket's send and receive), one hop every `--period-ms` so that the load between hops
+    /// cools the caches as it does in the chain. The kernel's wake-up of the blocked receiver
+    /// is not in it (both transports wake it through a Unix datagram socket).
+    #[arg(long)]
+    hop_profile: Option<u64>,
     /// Internal: run as a UDS relay role (ik, driver) in directory --dir.
     #[arg(long, hide = true)]
     uds_role: Option<String>,
@@ -143,7 +156,10 @@ fn main() -> std::process::ExitCode {
     let a = Args::parse();
     let r = match a.uds_role.as_deref() {
         Some(role) => uds_role(role, a.dir.as_deref().unwrap_or(Path::new(".")), &a),
-        None => bench(&a),
+        None => match a.hop_profile {
+            Some(n) => hop_profile(&a, n),
+            None => bench(&a),
+        },
     };
     match r {
         Ok(()) => std::process::ExitCode::SUCCESS,
@@ -179,18 +195,29 @@ fn robot(path: &str) -> Result<Robot> {
     Robot::new(&cfg).map_err(|e| anyhow!("robot model: {e}"))
 }
 
+/// SCHED_FIFO priority of a stage `below` steps under the driver (0 stays normal scheduling).
+fn stage_priority(a: &Args, below: i32) -> i32 {
+    if a.rt_priority <= 0 {
+        0
+    } else {
+        (a.rt_priority - below * a.priority_step).max(1)
+    }
+}
+
 fn bench(a: &Args) -> Result<()> {
     let period_ns = (a.period_ms * 1e6) as u64;
     let _pm_qos = a
         .cpu_dma_latency
         .and_then(pcr_nodes::realtime::hold_cpu_dma_latency);
     println!(
-        "# pcr-bench-latency: {} cycles per transport at a {} ms period, SCHED_FIFO priority {} \
-         (0 = normal scheduling), chain pinned to CPU {}, CPU wake-up latency held at {} us, \
-         {} CPUs",
+        "# pcr-bench-latency: {} cycles per transport at a {} ms period, SCHED_FIFO priorities \
+         driver {}, IK {}, planner {} (0 = normal scheduling), chain pinned to CPU {}, CPU \
+         wake-up latency held at {} us, {} CPUs",
         a.cycles,
         a.period_ms,
-        a.rt_priority,
+        stage_priority(a, 0),
+        stage_priority(a, 1),
+        stage_priority(a, 2),
         a.cpu.map_or("-".to_string(), |c| c.to_string()),
         a.cpu_dma_latency.map_or("-".to_string(), |c| c.to_string()),
         std::thread::available_parallelism().map_or(0, |n| n.get())
@@ -227,8 +254,6 @@ fn bench_iceoryx2_in(a: &Args, period_ns: u64, prefix: &str) -> Result<(Hists, u
         a.period_ms.to_string(),
         "--robot".into(),
         a.robot.clone(),
-        "--rt-priority".into(),
-        a.rt_priority.to_string(),
     ];
     let lock = a.mlockall.then(|| "--mlockall".to_string());
     let cpu = a
@@ -238,10 +263,15 @@ fn bench_iceoryx2_in(a: &Args, period_ns: u64, prefix: &str) -> Result<(Hists, u
         .flatten();
     let common: Vec<String> = common.into_iter().chain(lock).chain(cpu).collect();
     let mut kids = Kids(Vec::new());
-    for b in ["pcr-driver", "pcr-ik", "pcr-planner"] {
+    for (below, b) in ["pcr-driver", "pcr-ik", "pcr-planner"]
+        .into_iter()
+        .enumerate()
+    {
         kids.0.push(
             std::process::Command::new(bin_dir().join(b))
                 .args(&common)
+                .arg("--rt-priority")
+                .arg(stage_priority(a, below as i32).to_string())
                 .env("RUST_LOG", "warn")
                 .stdin(Stdio::null())
                 .spawn()
@@ -305,8 +335,10 @@ fn bench_iceoryx2_in(a: &Args, period_ns: u64, prefix: &str) -> Result<(Hists, u
             if !planner_busy {
                 run_id += 1;
                 planner_busy = true;
-                let _ =
-                    pub_cmd.send_copy(simple_command(command_kind::RUN, program_id::PAPER, run_id));
+                let _ = pcr_nodes::publish(
+                    &pub_cmd,
+                    simple_command(command_kind::RUN, program_id::PAPER, run_id),
+                );
             }
             if start.elapsed()
                 > Duration::from_secs(30) + Duration::from_nanos(period_ns * a.cycles * 3)
@@ -344,6 +376,7 @@ fn from_bytes<T: Copy + Default>(b: &[u8]) -> T {
 
 fn uds_role(role: &str, dir: &Path, a: &Args) -> Result<()> {
     let robot = robot(&a.robot)?;
+    // --rt-priority carries this role's own priority (set by bench_uds).
     pcr_nodes::realtime::apply(a.rt_priority, a.cpu, false);
     let mut buf = [0u8; 4096];
     match role {
@@ -401,12 +434,12 @@ fn bench_uds(a: &Args, period_ns: u64) -> Result<(Hists, u64)> {
     col.set_nonblocking(true)?;
     let me = std::env::current_exe()?;
     let mut kids = Kids(Vec::new());
-    for role in ["driver", "ik"] {
+    for (below, role) in ["driver", "ik"].into_iter().enumerate() {
         kids.0.push(
             std::process::Command::new(&me)
                 .args(["--uds-role", role, "--robot", &a.robot])
                 .arg("--rt-priority")
-                .arg(a.rt_priority.to_string())
+                .arg(stage_priority(a, below as i32).to_string())
                 .args(a.cpu.map(|c| format!("--cpu={c}")))
                 .arg("--period-ms")
                 .arg(a.period_ms.to_string())
@@ -424,7 +457,7 @@ fn bench_uds(a: &Args, period_ns: u64) -> Result<(Hists, u64)> {
         std::thread::sleep(Duration::from_millis(10));
     }
     let tx = UnixDatagram::unbound()?;
-    let rt = pcr_nodes::realtime::apply(a.rt_priority, a.cpu, false);
+    let rt = pcr_nodes::realtime::apply(stage_priority(a, 2), a.cpu, false);
     let mut interp = InterpolatorStep::new(InterimPathSource::new(), Pose::default());
     let mut h = Hists::new();
     let mut late_wakes = 0u64;
@@ -490,4 +523,132 @@ fn bench_uds(a: &Args, period_ns: u64) -> Result<(Hists, u64)> {
     }
     let _ = std::fs::remove_dir_all(&dir);
     Ok((h, late_wakes))
+}
+
+/// `--hop-profile N`: where the user-space time of one hop goes, iceoryx2 vs the socket.
+fn hop_profile(a: &Args, n: u64) -> Result<()> {
+    let rt = pcr_nodes::realtime::apply(stage_priority(a, 0), a.cpu, false);
+    let period = Duration::from_secs_f64(a.period_ms * 1e-3);
+    let new_h = || Histogram::<u64>::new_with_bounds(1, 10_000_000_000, 3).unwrap();
+    let row = |name: &str, h: &Histogram<u64>| {
+        let q = |p: f64| h.value_at_quantile(p) as f64 / 1e3;
+        println!(
+            "| {name} | {:.1} | {:.1} | {:.1} | {:.1} |",
+            q(0.5),
+            q(0.99),
+            q(0.999),
+            h.max() as f64 / 1e3
+        );
+    };
+    println!(
+        "# hop profile: {n} hops per transport, one every {} ms, SCHED_FIFO {}, CPU {}; \
+         TaskSetpoint ({} bytes)",
+        a.period_ms,
+        rt.priority,
+        rt.cpu.map_or("-".to_string(), |c| c.to_string()),
+        std::mem::size_of::<TaskSetpoint>()
+    );
+    // iceoryx2, with the chain's service settings (pcr_nodes::ports).
+    let prefix = format!("pcrhop{}_", std::process::id());
+    let names = [
+        "publish (loan, write in place, send)",
+        "notify",
+        "WaitSet wake-up to the callback (epoll_wait returns at once)",
+        "drain the event (listener try_wait)",
+        "receive the newest sample (latest)",
+        "total",
+    ];
+    let mut hs: Vec<Histogram<u64>> = names.iter().map(|_| new_h()).collect();
+    {
+        let cn = ChainNode::new("pcr-hop", &prefix, PROTOCOL_VERSION)?;
+        let p = cn.publisher::<TaskSetpoint>("hop-profile")?;
+        let sub = cn.subscriber::<TaskSetpoint>("hop-profile")?;
+        let notifier = cn.notifier("hop-profile")?;
+        let listener = cn.listener("hop-profile")?;
+        let ws = WaitSetBuilder::new()
+            .create::<ipc::Service>()
+            .map_err(|e| anyhow!("{e:?}"))?;
+        let g = ws
+            .attach_notification(&listener)
+            .map_err(|e| anyhow!("{e:?}"))?;
+        for i in 0..n + 50 {
+            std::thread::sleep(period);
+            let sp = TaskSetpoint {
+                seq: i,
+                ..Default::default()
+            };
+            let t0 = monotonic_ns();
+            let _ = pcr_nodes::publish(&p, sp);
+            let t1 = monotonic_ns();
+            let _ = notifier.notify();
+            let t2 = monotonic_ns();
+            let mut t = [0u64; 3];
+            let _ = ws.wait_and_process_once(|id| {
+                if id.has_event_from(&g) {
+                    t[0] = monotonic_ns();
+                    let _ = listener.try_wait(|_| {});
+                    t[1] = monotonic_ns();
+                    let _ = pcr_nodes::ports::latest(&sub);
+                    t[2] = monotonic_ns();
+                }
+                CallbackProgression::Continue
+            });
+            if i >= 50 && t[2] != 0 {
+                let v = [
+                    t1 - t0,
+                    t2 - t1,
+                    t[0] - t2,
+                    t[1] - t[0],
+                    t[2] - t[1],
+                    t[2] - t0,
+                ];
+                for (h, x) in hs.iter_mut().zip(v) {
+                    h.saturating_record(x.max(1));
+                }
+            }
+        }
+    }
+    pcr_nodes::ports::remove_leftovers(&prefix);
+    println!("\n## iceoryx2 hop, user space\n");
+    println!("| part | p50 us | p99 us | p99.9 us | max us |");
+    println!("|---|---:|---:|---:|---:|");
+    for (name, h) in names.iter().zip(&hs) {
+        row(name, h);
+    }
+    // The socket: send a datagram of the same size, receive it (blocking recv, data present).
+    let dir = std::env::temp_dir().join(format!("pcrhop-uds-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir)?;
+    let rx = UnixDatagram::bind(dir.join("rx.sock"))?;
+    let tx = UnixDatagram::unbound()?;
+    let unames = ["send_to", "recv (data present)", "total"];
+    let mut uh: Vec<Histogram<u64>> = unames.iter().map(|_| new_h()).collect();
+    let mut buf = [0u8; 4096];
+    let target = dir.join("rx.sock");
+    for i in 0..n + 50 {
+        std::thread::sleep(period);
+        let sp = TaskSetpoint {
+            seq: i,
+            ..Default::default()
+        };
+        let t0 = monotonic_ns();
+        let _ = tx.send_to(as_bytes(&sp), &target);
+        let t1 = monotonic_ns();
+        let k = rx.recv(&mut buf)?;
+        let _sp: TaskSetpoint = from_bytes(&buf[..k]);
+        let t2 = monotonic_ns();
+        if i >= 50 {
+            for (h, x) in uh.iter_mut().zip([t1 - t0, t2 - t1, t2 - t0]) {
+                h.saturating_record(x.max(1));
+            }
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    println!("\n## Unix datagram socket hop, user space\n");
+    println!("| part | p50 us | p99 us | p99.9 us | max us |");
+    println!("|---|---:|---:|---:|---:|");
+    for (name, h) in unames.iter().zip(&uh) {
+        row(name, h);
+    }
+    Ok(())
 }

@@ -21,7 +21,8 @@ use pcr_messages::{
     monotonic_ns, services as s, DriverStateMsg, Heartbeat, JointSetpoint, NodeKind,
 };
 use pcr_mocap_bridge::{QtmServer, ServerConfig};
-use pcr_nodes::{chain_time_s, ports::latest, ChainNode, CommonArgs, CycleStats, ProtocolGuard};
+use pcr_nodes::cycle::{driver_on_setpoint, driver_run};
+use pcr_nodes::{ports::latest, publish, ChainNode, CommonArgs, CycleStats, ProtocolGuard};
 use pcr_plant::PlantConfig;
 use pcr_robot::RobotConfig;
 
@@ -300,48 +301,23 @@ fn serve<D: Driver, P: PoseSensor>(
         .map_err(|e| anyhow!("interval: {e:?}"))?;
 
     let r = pcr_nodes::run_waitset(&ws, |id| {
-        let mut run = |input: Option<&JointSetpoint>| -> bool {
-            let mut r = step.step(chain_time_s(), input);
-            if r.is_err() && step.driver().tripped() {
-                // This process stalled longer than the watchdog (it has held the drive
-                // meanwhile): re-arm and carry on; the rate limit bounds any catch-up.
-                tracing::warn!("driver process stalled: watchdog re-armed");
-                step.driver_mut().reset();
-                r = step.step(chain_time_s(), input);
-            }
-            match r {
-                Ok(st) => {
-                    let _ = pub_st.send_copy(st);
-                    let _ = notify.notify();
-                    true
-                }
-                Err(e) => {
-                    tracing::error!(driver = step.driver().name(), "driver: {e}");
-                    if matches!(e, pcr_driver::DriverError::Transport(_)) {
-                        fatal = Some(anyhow!("driver transport: {e}"));
-                        return false;
-                    }
-                    true
-                }
-            }
-        };
         if id.has_event_from(&ev) {
-            let _ = listener.try_wait(|_| {});
-            let rx = monotonic_ns();
-            if let Ok(Some(mut j)) = latest(&sub) {
-                j.stamps.drv_rx_ns = rx;
+            if let Some((rx, hop, r)) =
+                driver_on_setpoint(&listener, &sub, &mut step, &pub_st, &notify)
+            {
                 fresh_since_tick = true;
-                if !run(Some(&j)) {
+                if let Err(e) = r {
+                    fatal = Some(e);
                     return CallbackProgression::Stop;
                 }
-                let hop = rx.saturating_sub(j.stamps.ik_pub_ns);
                 stats.record(monotonic_ns() - rx, hop);
             }
         }
         if id.has_event_from(&tick) {
             if !fresh_since_tick {
                 stats.stale_input();
-                if !run(None) {
+                if let Err(e) = driver_run(&mut step, None, &pub_st, &notify) {
+                    fatal = Some(e);
                     return CallbackProgression::Stop;
                 }
             }
@@ -366,7 +342,7 @@ fn serve<D: Driver, P: PoseSensor>(
                     q.simulate_restart(std::time::Duration::from_secs(1));
                 }
             }
-            let _ = pub_hb.send_copy(stats.heartbeat(step.holding()));
+            let _ = publish(&pub_hb, stats.heartbeat(step.holding()));
             pcr_nodes::recheck(&guard);
         }
         CallbackProgression::Continue
@@ -376,7 +352,7 @@ fn serve<D: Driver, P: PoseSensor>(
     if fatal.is_none() {
         // Terminated (the supervisor stops the chain, or died: SIGTERM by PR_SET_PDEATHSIG):
         // the last command to the drive holds the motors where they are.
-        let (t, period) = (chain_time_s(), c.period().as_secs_f64());
+        let (t, period) = (pcr_nodes::chain_time_s(), c.period().as_secs_f64());
         let held = step.driver_mut().read(t, period).and_then(|st| {
             let cmd = pcr_driver::MotorCommand {
                 steps: st.steps,

@@ -7,7 +7,7 @@ use iceoryx2::prelude::*;
 use pcr_control::IkStep;
 use pcr_kinematics::Robot;
 use pcr_messages::{monotonic_ns, services as s, Heartbeat, JointSetpoint, NodeKind, TaskSetpoint};
-use pcr_nodes::{ports::latest, CommonArgs, CycleStats};
+use pcr_nodes::{cycle::ik_on_setpoint, publish, CommonArgs, CycleStats};
 use pcr_robot::RobotConfig;
 
 #[derive(Parser, Debug)]
@@ -58,17 +58,8 @@ fn run(a: Args) -> Result<()> {
 
     let r = pcr_nodes::run_waitset(&ws, |id| {
         if id.has_event_from(&ev) {
-            // Level-triggered: drain the event before anything else.
-            let _ = listener.try_wait(|_| {});
-            let rx = monotonic_ns();
-            if let Ok(Some(mut sp)) = latest(&sub) {
+            if let Some((rx, hop)) = ik_on_setpoint(&listener, &sub, &mut ik, &pub_j, &notify) {
                 last_rx = rx;
-                sp.stamps.ik_rx_ns = rx;
-                let mut j = ik.step(&sp);
-                j.stamps.ik_pub_ns = monotonic_ns();
-                let _ = pub_j.send_copy(j);
-                let _ = notify.notify();
-                let hop = rx.saturating_sub(sp.stamps.interp_pub_ns);
                 stats.record(monotonic_ns() - rx, hop);
             }
         }
@@ -77,7 +68,7 @@ fn run(a: Args) -> Result<()> {
             if stale {
                 stats.stale_input();
             }
-            let _ = pub_hb.send_copy(stats.heartbeat(stale));
+            let _ = publish(&pub_hb, stats.heartbeat(stale));
             pcr_nodes::recheck(&guard);
         }
         CallbackProgression::Continue

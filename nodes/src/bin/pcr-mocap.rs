@@ -15,12 +15,12 @@
 use anyhow::{anyhow, Result};
 use clap::{Parser, ValueEnum};
 use iceoryx2::prelude::*;
-use pcr_control::{measured_of, CorrectionConfig, CorrectionStep};
+use pcr_control::{CorrectionConfig, CorrectionStep};
 use pcr_messages::{
     correction_flags, monotonic_ns, services as s, Correction, DriverStateMsg, Heartbeat,
     MeasuredPose, MocapSample, NodeKind, PROTOCOL_VERSION,
 };
-use pcr_nodes::{ports::latest, CommonArgs, CycleStats};
+use pcr_nodes::{cycle::mocap_on_state, ports::latest, publish, CommonArgs, CycleStats};
 
 #[derive(Parser, Debug)]
 #[command(about = "pcr-mocap: measured pose and task-space correction")]
@@ -100,13 +100,8 @@ fn run(a: Args) -> Result<()> {
         .map_err(|e| anyhow!("interval: {e:?}"))?;
     let r = pcr_nodes::run_waitset(&ws, |id| {
         if id.has_event_from(&ev) {
-            let _ = listener.try_wait(|_| {});
-            let rx = monotonic_ns();
-            if let Ok(Some(st)) = latest(&sub) {
+            if let Some(rx) = mocap_on_state(&listener, &sub, &mut corr, &pub_m, &pub_c) {
                 last_rx = rx;
-                let m = measured_of(&st);
-                let _ = pub_m.send_copy(m);
-                let _ = pub_c.send_copy(corr.step(&m, st.t_s, &st.planned));
                 stats.record(monotonic_ns() - rx, 0);
             }
         }
@@ -115,7 +110,7 @@ fn run(a: Args) -> Result<()> {
             if stale {
                 stats.stale_input();
             }
-            let _ = pub_hb.send_copy(stats.heartbeat(stale));
+            let _ = publish(&pub_hb, stats.heartbeat(stale));
             pcr_nodes::recheck(&guard);
         }
         CallbackProgression::Continue
@@ -174,7 +169,7 @@ fn run_qtm(a: &Args, cfg: CorrectionConfig) -> Result<()> {
                         held = true;
                     }
                     stats.stale_input();
-                    let _ = pub_c.send_copy(corr.hold(st.t_s, st.seq));
+                    let _ = publish(&pub_c, corr.hold(st.t_s, st.seq));
                 }
                 stats.record(monotonic_ns() - rx, 0);
             }
@@ -196,17 +191,17 @@ fn run_qtm(a: &Args, cfg: CorrectionConfig) -> Result<()> {
                     valid: u32::from(pose.is_some()),
                     version: PROTOCOL_VERSION,
                 };
-                let _ = pub_m.send_copy(meas);
+                let _ = publish(&pub_m, meas);
                 if pending {
                     pending = false;
                     let out = corr.measure(&meas);
                     debug_assert_eq!(out.flags & correction_flags::HELD, 0);
-                    let _ = pub_c.send_copy(out);
+                    let _ = publish(&pub_c, out);
                 }
             }
         }
         if id.has_event_from(&hb) {
-            let _ = pub_hb.send_copy(stats.heartbeat(held));
+            let _ = publish(&pub_hb, stats.heartbeat(held));
             pcr_nodes::recheck(&guard);
         }
         CallbackProgression::Continue

@@ -19,7 +19,8 @@ use pcr_messages::{
     command_kind, driver_flags, monotonic_ns, planner_state, services as s, Command, Correction,
     DriverStateMsg, Heartbeat, NodeKind, PlannerStatus, Refusal, TaskSetpoint,
 };
-use pcr_nodes::{chain_time_s, ports::latest, CommonArgs, CycleStats, PeriodicTimer};
+use pcr_nodes::cycle::planner_emit;
+use pcr_nodes::{chain_time_s, ports::latest, publish, CommonArgs, CycleStats, PeriodicTimer};
 use pcr_robot::RobotConfig;
 use std::sync::{mpsc, Arc, Mutex};
 
@@ -111,7 +112,10 @@ fn run(a: Args) -> Result<()> {
     // Whoever asked learns why a command was refused (the supervisor, `ctl run`).
     let refuse = |run_id: u32, why: &dyn std::fmt::Display| {
         tracing::error!(run_id, "command refused: {why}");
-        let _ = pub_refusal.send_copy(Refusal::new(chain_time_s(), run_id, &why.to_string()));
+        let _ = pcr_nodes::publish(
+            &pub_refusal,
+            Refusal::new(chain_time_s(), run_id, &why.to_string()),
+        );
     };
     let pub_hb = cn.publisher::<Heartbeat>(s::HEARTBEAT)?;
     let sub_cmd = cn.subscriber::<Command>(s::COMMAND)?;
@@ -279,20 +283,17 @@ fn run(a: Args) -> Result<()> {
                 auto_paused = false;
                 tracing::info!("drive following again: program resumed");
             }
-            let mut sp = interp.step(t);
-            sp.stamps.interp_pub_ns = monotonic_ns();
-            let _ = pub_sp.send_copy(sp);
-            let _ = notify.notify();
+            planner_emit(&mut interp, t, &pub_sp, &notify);
             let status = planning_status(interp.status(t), planning);
             if status.state != last_state {
                 last_state = status.state;
-                let _ = pub_status.send_copy(status);
+                let _ = publish(&pub_status, status);
             }
             stats.record(monotonic_ns() - wake, latency);
         }
         if id.has_event_from(&hb) {
-            let _ = pub_hb.send_copy(stats.heartbeat(false));
-            let _ = pub_status.send_copy(planning_status(interp.status(t), planning));
+            let _ = publish(&pub_hb, stats.heartbeat(false));
+            let _ = publish(&pub_status, planning_status(interp.status(t), planning));
             pcr_nodes::recheck(&guard);
         }
         CallbackProgression::Continue

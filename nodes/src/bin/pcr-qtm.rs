@@ -15,7 +15,7 @@ use pcr_messages::{mocap_valid, monotonic_ns, services as s, Heartbeat, MocapSam
 use pcr_mocap_bridge::{
     ClientConfig, Frame, Mapper, MarkerLabels, QtmSource, Registration, SourceEvent, StreamRate,
 };
-use pcr_nodes::{CommonArgs, CycleStats};
+use pcr_nodes::{publish, CommonArgs, CycleStats};
 use pcr_robot::RobotConfig;
 use std::time::{Duration, Instant};
 
@@ -187,10 +187,13 @@ fn run(a: Args) -> Result<()> {
                     reserved: 0,
                 };
                 let now = monotonic_ns();
-                let _ = pub_s.send_copy(MocapSample {
-                    pub_ns: now,
-                    ..sample
-                });
+                let _ = publish(
+                    &pub_s,
+                    MocapSample {
+                        pub_ns: now,
+                        ..sample
+                    },
+                );
                 let _ = notify.notify();
                 last_pub_ns = now;
                 stats.record(now.saturating_sub(rx), 0);
@@ -214,7 +217,7 @@ fn run(a: Args) -> Result<()> {
             if stale {
                 stats.stale_input();
             }
-            let _ = pub_hb.send_copy(stats.heartbeat(stale));
+            let _ = publish(&pub_hb, stats.heartbeat(stale));
             pcr_nodes::recheck(&guard);
         }
     }
