@@ -125,6 +125,16 @@ impl Driver for PlantDrive {
 
     fn write(&mut self, time_s: f64, period_s: f64, cmd: &MotorCommand) -> Result<(), DriverError> {
         let t = self.plant_time(time_s);
+        // A command earlier than the end of the last cycle (the one before came late): the
+        // plant takes back the rest of that cycle, as the firmware starts the new segment at
+        // once; otherwise the plant would run a cycle ahead of the clock from then on.
+        if let Some(t0) = self
+            .plant
+            .rewind_to(t)
+            .map_err(|e| DriverError::Limit(e.to_string()))?
+        {
+            self.pending.retain(|m| m.t_s <= t0 + 1e-12);
+        }
         self.plant.write(t, period_s, cmd)
     }
 

@@ -1,8 +1,10 @@
 //! The steady-state cycle bodies of the chain's processes, out of their `main`s so that they can
 //! be tested (`tests/cycle_alloc.rs`: no heap allocation in a steady-state cycle). Each one is
-//! what the process runs when its WaitSet wakes it: drain the event (level-triggered), take the
-//! newest input, run the step, publish zero-copy ([`publish`]) and notify.
+//! what the process runs when it wakes on the upstream event (the IK and the driver on their hop
+//! listener, [`crate::hop::wait`], which has drained the event; the mocap on its WaitSet): take
+//! the newest input, run the step, publish zero-copy ([`publish`]) and notify.
 
+use crate::hop::HopService;
 use crate::ports::{latest, publish};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
@@ -29,7 +31,7 @@ pub fn planner_emit<S: SetpointSource>(
     interp: &mut InterpolatorStep<S>,
     t_s: f64,
     pub_sp: &Pub<TaskSetpoint>,
-    notify: &Notifier<ipc::Service>,
+    notify: &Notifier<HopService>,
 ) {
     let mut sp = interp.step(t_s);
     sp.stamps.interp_pub_ns = monotonic_ns();
@@ -37,18 +39,15 @@ pub fn planner_emit<S: SetpointSource>(
     let _ = notify.notify();
 }
 
-/// `pcr-ik` on the task-setpoint event: solves the newest setpoint and publishes the joint
-/// setpoint (+ event). Returns the receive time and the hop latency (planner publish -> receive)
-/// when there was a setpoint.
+/// `pcr-ik` on the task-setpoint event (already drained by [`crate::hop::wait`]): solves the
+/// newest setpoint and publishes the joint setpoint (+ event). Returns the receive time and the
+/// hop latency (planner publish -> receive) when there was a setpoint.
 pub fn ik_on_setpoint(
-    listener: &Listener<ipc::Service>,
     sub: &Sub<TaskSetpoint>,
     ik: &mut IkStep,
     pub_j: &Pub<JointSetpoint>,
-    notify: &Notifier<ipc::Service>,
+    notify: &Notifier<HopService>,
 ) -> Option<(u64, u64)> {
-    // Level-triggered: drain the event before anything else.
-    let _ = listener.try_wait(|_| {});
     let rx = monotonic_ns();
     let Ok(Some(mut sp)) = latest(sub) else {
         return None;
@@ -95,18 +94,16 @@ pub fn driver_run<D: Driver, P: PoseSensor>(
     }
 }
 
-/// `pcr-driver` on the joint-setpoint event: drains the event, runs the drive with the newest
-/// setpoint ([`driver_run`]). Returns the receive time, the hop latency (IK publish -> receive)
-/// and the cycle's outcome when there was a setpoint.
+/// `pcr-driver` on the joint-setpoint event (already drained by [`crate::hop::wait`]): runs the
+/// drive with the newest setpoint ([`driver_run`]). Returns the receive time, the hop latency
+/// (IK publish -> receive) and the cycle's outcome when there was a setpoint.
 #[allow(clippy::type_complexity)]
 pub fn driver_on_setpoint<D: Driver, P: PoseSensor>(
-    listener: &Listener<ipc::Service>,
     sub: &Sub<JointSetpoint>,
     step: &mut DriverStep<SafeDriver<D>, P>,
     pub_st: &Pub<DriverStateMsg>,
     notify: &Notifier<ipc::Service>,
 ) -> Option<(u64, u64, Result<(), anyhow::Error>)> {
-    let _ = listener.try_wait(|_| {});
     let rx = monotonic_ns();
     let Ok(Some(mut j)) = latest(sub) else {
         return None;

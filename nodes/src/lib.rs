@@ -2,12 +2,14 @@
 //! iceoryx2 node and ports (service settings in one place), the protocol-version handshake, cycle
 //! statistics with heartbeats, and real-time settings.
 //!
-//! Each binary wraps one step of `pcr-control` and wakes on an iceoryx2 WaitSet (events or a
-//! periodic interval), never busy-spinning; SIGINT/SIGTERM end the WaitSet loop and the process
+//! Each binary wraps one step of `pcr-control` and sleeps until there is work, never
+//! busy-spinning: the IK and the driver on their hop listener ([`hop`]), the others on an
+//! iceoryx2 WaitSet (events or a periodic timer); SIGINT/SIGTERM end the loop and the process
 //! exits cleanly, releasing its shared memory.
 
 pub mod args;
 pub mod cycle;
+pub mod hop;
 pub mod ports;
 pub mod protocol;
 pub mod realtime;

@@ -1,6 +1,7 @@
 //! The iceoryx2 node of a process and its ports. Service settings live here only, so that every
 //! process (and the supervisor) opens each service with the same settings.
 
+use crate::hop::HopService;
 use anyhow::{anyhow, Context, Result};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
@@ -39,6 +40,10 @@ pub struct ChainNode {
     pub node: Node<ipc::Service>,
     /// The protocol version of the service names.
     pub version: u32,
+    /// The node of the hop events ([`HopService`]), made on first use.
+    hop: std::cell::OnceCell<Node<HopService>>,
+    name: NodeName,
+    config: Config,
 }
 
 impl Debug for ChainNode {
@@ -59,7 +64,30 @@ impl ChainNode {
             .config(&config)
             .create::<ipc::Service>()
             .map_err(|e| anyhow!("cannot create iceoryx2 node {name:?}: {e:?}"))?;
-        Ok(Self { node, version })
+        Ok(Self {
+            node,
+            version,
+            hop: std::cell::OnceCell::new(),
+            name: node_name,
+            config,
+        })
+    }
+
+    /// The node of the hop events: the process's node itself while [`HopService`] is the
+    /// process's service type, otherwise a second node of the same name and configuration.
+    fn hop_node(&self) -> Result<&Node<HopService>> {
+        if let Some(n) = (&self.node as &dyn std::any::Any).downcast_ref::<Node<HopService>>() {
+            return Ok(n);
+        }
+        if let Some(n) = self.hop.get() {
+            return Ok(n);
+        }
+        let n = NodeBuilder::new()
+            .name(&self.name)
+            .config(&self.config)
+            .create::<HopService>()
+            .map_err(|e| anyhow!("cannot create iceoryx2 hop node: {e:?}"))?;
+        Ok(self.hop.get_or_init(|| n))
     }
 
     fn sname(&self, base: &str) -> Result<ServiceName> {
@@ -151,6 +179,39 @@ impl ChainNode {
     /// A listener on the versioned event service `base`.
     pub fn listener(&self, base: &str) -> Result<Listener<ipc::Service>> {
         self.event(base)?
+            .listener_builder()
+            .create()
+            .map_err(|e| anyhow!("cannot create listener on {base}: {e:?}"))
+    }
+
+    fn hop_event(
+        &self,
+        base: &str,
+    ) -> Result<iceoryx2::service::port_factory::event::PortFactory<HopService>> {
+        let name = self.sname(base)?;
+        self.hop_node()?
+            .service_builder(&name)
+            .event()
+            .max_notifiers(MAX_PORTS)
+            .max_listeners(MAX_PORTS)
+            .max_nodes(MAX_NODES)
+            .event_id_max_value(crate::hop::MAX_EVENT_ID)
+            .open_or_create()
+            .map_err(|e| anyhow!("cannot open hop event service {base}: {e:?}"))
+    }
+
+    /// A notifier on the hop event service `base` (the chain's hot path: see [`crate::hop`]).
+    pub fn hop_notifier(&self, base: &str) -> Result<Notifier<HopService>> {
+        self.hop_event(base)?
+            .notifier_builder()
+            .default_event_id(crate::hop::SAMPLE)
+            .create()
+            .map_err(|e| anyhow!("cannot create notifier on {base}: {e:?}"))
+    }
+
+    /// A listener on the hop event service `base`, woken by [`crate::hop::wait`].
+    pub fn hop_listener(&self, base: &str) -> Result<Listener<HopService>> {
+        self.hop_event(base)?
             .listener_builder()
             .create()
             .map_err(|e| anyhow!("cannot create listener on {base}: {e:?}"))

@@ -1,9 +1,9 @@
 //! No heap allocation in a steady-state cycle of any node of the chain: a counting global
 //! allocator observes the cycle bodies the processes run ([`pcr_nodes::cycle`]), on real iceoryx2
 //! services (their own prefix, removed afterwards): the planner's setpoint (a running program)
-//! with its input drains, the IK, the driver (sim backend inside the safety stack), the mocap
-//! correction, each woken by its WaitSet on the upstream event, and the heartbeat with the
-//! protocol check. Every publication goes through the loan helper ([`pcr_nodes::publish`]).
+//! with its input drains, the IK and the driver (sim backend inside the safety stack), each woken
+//! on its hop listener ([`pcr_nodes::hop::wait`]) as the processes are, the mocap correction
+//! woken by its WaitSet, and the heartbeat with the protocol check. Every publication goes through the loan helper ([`pcr_nodes::publish`]).
 //!
 //! iceoryx2 0.10 itself allocates in two places of a cycle, which no caller can avoid: every
 //! loaned sample gets a small reference-counted shared state (`Rc::new` in
@@ -31,7 +31,7 @@ use pcr_messages::{
 };
 use pcr_nodes::cycle::{driver_on_setpoint, ik_on_setpoint, mocap_on_state, planner_emit};
 use pcr_nodes::ports::{latest, remove_leftovers};
-use pcr_nodes::{publish, ChainNode, CycleStats, ProtocolGuard};
+use pcr_nodes::{hop, publish, ChainNode, CycleStats, ProtocolGuard};
 
 struct Counting;
 
@@ -41,8 +41,8 @@ static BY_PART: [AtomicUsize; 8] = [const { AtomicUsize::new(0) }; 8];
 const PARTS: [&str; 8] = [
     "planner inputs",
     "planner setpoint",
-    "ik (WaitSet + cycle)",
-    "driver (WaitSet + cycle)",
+    "ik (hop wait + cycle)",
+    "driver (hop wait + cycle)",
     "mocap (WaitSet + cycle)",
     "heartbeat",
     "protocol check",
@@ -168,18 +168,18 @@ fn run(prefix: &str) {
     let guard = ProtocolGuard::new(&cn, NodeKind::Ik).unwrap();
     // planner
     let pub_sp = cn.publisher::<TaskSetpoint>(s::TASK_SETPOINT).unwrap();
-    let notify_sp = cn.notifier(s::TASK_SETPOINT).unwrap();
+    let notify_sp = cn.hop_notifier(s::TASK_SETPOINT).unwrap();
     let sub_cmd = cn.subscriber::<Command>(s::COMMAND).unwrap();
     let sub_corr = cn.subscriber::<Correction>(s::CORRECTION).unwrap();
     let sub_state_p = cn.subscriber::<DriverStateMsg>(s::DRIVER_STATE).unwrap();
     // ik
     let sub_sp = cn.subscriber::<TaskSetpoint>(s::TASK_SETPOINT).unwrap();
-    let lis_sp = cn.listener(s::TASK_SETPOINT).unwrap();
+    let lis_sp = cn.hop_listener(s::TASK_SETPOINT).unwrap();
     let pub_j = cn.publisher::<JointSetpoint>(s::JOINT_SETPOINT).unwrap();
-    let notify_j = cn.notifier(s::JOINT_SETPOINT).unwrap();
+    let notify_j = cn.hop_notifier(s::JOINT_SETPOINT).unwrap();
     // driver
     let sub_j = cn.subscriber::<JointSetpoint>(s::JOINT_SETPOINT).unwrap();
-    let lis_j = cn.listener(s::JOINT_SETPOINT).unwrap();
+    let lis_j = cn.hop_listener(s::JOINT_SETPOINT).unwrap();
     let pub_st = cn.publisher::<DriverStateMsg>(s::DRIVER_STATE).unwrap();
     let notify_st = cn.notifier(s::DRIVER_STATE).unwrap();
     // mocap
@@ -215,10 +215,6 @@ fn run(prefix: &str) {
     });
     let mut stats = CycleStats::new(NodeKind::Ik, PROTOCOL_VERSION, 20_000_000);
 
-    let ws_ik = WaitSetBuilder::new().create::<ipc::Service>().unwrap();
-    let g_ik = ws_ik.attach_notification(&lis_sp).unwrap();
-    let ws_drv = WaitSetBuilder::new().create::<ipc::Service>().unwrap();
-    let g_drv = ws_drv.attach_notification(&lis_j).unwrap();
     let ws_mocap = WaitSetBuilder::new().create::<ipc::Service>().unwrap();
     let g_mocap = ws_mocap.attach_notification(&lis_st).unwrap();
 
@@ -237,38 +233,24 @@ fn run(prefix: &str) {
         t += period;
         part(1);
         planner_emit(&mut interp, t, &pub_sp, &notify_sp);
-        // ik, woken by its WaitSet
+        // ik, woken on its hop listener (the planner notified it just now)
         part(2);
-        let _ = ws_ik.wait_and_process_once_with_timeout(
-            |id| {
-                if id.has_event_from(&g_ik) {
-                    if let Some((rx, hop)) =
-                        ik_on_setpoint(&lis_sp, &sub_sp, &mut ik, &pub_j, &notify_j)
-                    {
-                        stats.record(pcr_messages::monotonic_ns() - rx, hop);
-                        served[0] += 1;
-                    }
-                }
-                CallbackProgression::Continue
-            },
-            Duration::from_secs(1),
-        );
+        let w = hop::wait(&lis_sp).unwrap();
+        if w.sample {
+            if let Some((rx, latency)) = ik_on_setpoint(&sub_sp, &mut ik, &pub_j, &notify_j) {
+                stats.record(pcr_messages::monotonic_ns() - rx, latency);
+                served[0] += 1;
+            }
+        }
         // driver
         part(3);
-        let _ = ws_drv.wait_and_process_once_with_timeout(
-            |id| {
-                if id.has_event_from(&g_drv) {
-                    if let Some((_, _, r)) =
-                        driver_on_setpoint(&lis_j, &sub_j, &mut step, &pub_st, &notify_st)
-                    {
-                        r.unwrap();
-                        served[1] += 1;
-                    }
-                }
-                CallbackProgression::Continue
-            },
-            Duration::from_secs(1),
-        );
+        let w = hop::wait(&lis_j).unwrap();
+        if w.sample {
+            if let Some((_, _, r)) = driver_on_setpoint(&sub_j, &mut step, &pub_st, &notify_st) {
+                r.unwrap();
+                served[1] += 1;
+            }
+        }
         // mocap
         part(4);
         let _ = ws_mocap.wait_and_process_once_with_timeout(
@@ -314,9 +296,9 @@ fn run(prefix: &str) {
         .map(|(p, c)| format!("{p}: {}", c.load(Ordering::SeqCst)))
         .collect();
     // Per cycle: 7 samples loaned and sent (planner setpoint, IK joint setpoint, driver
-    // state, mocap measured pose and correction, heartbeat, protocol announcement) and 3
-    // WaitSet wake-ups (IK, driver, mocap).
-    let iceoryx2_own = n as usize * (7 * per_loan + 3 * per_wake);
+    // state, mocap measured pose and correction, heartbeat, protocol announcement) and one
+    // WaitSet wake-up (mocap); the hop waits (IK, driver) allocate nothing.
+    let iceoryx2_own = n as usize * (7 * per_loan + per_wake);
     assert_eq!(
         allocs,
         iceoryx2_own,

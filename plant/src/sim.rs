@@ -90,6 +90,23 @@ pub struct Plant {
     jac_cache: Option<JacobianCache>,
     /// Sign of det(Jacobian) of the statics at home (with this plant's friction): stable.
     stable_sign: f64,
+    /// The last cycle run: its start state, period and command ([`Plant::rewind_to`]).
+    last_cycle: Option<CycleRecord>,
+}
+
+/// What [`Plant::rewind_to`] needs of the last cycle: the state at its start, its period and
+/// command.
+#[derive(Debug, Clone)]
+struct CycleRecord {
+    act: [Actuator; 3],
+    creep: [f64; 3],
+    anchors: FrictionAnchors,
+    state: TrueState,
+    history_len: usize,
+    measurements_len: usize,
+    next_sample: u64,
+    period: f64,
+    cmd: MotorCommand,
 }
 
 impl Plant {
@@ -175,6 +192,7 @@ impl Plant {
             fallbacks: 0,
             jac_cache: None,
             stable_sign,
+            last_cycle: None,
             truth,
             cfg: cfg.clone(),
         };
@@ -262,18 +280,30 @@ impl Plant {
 
     /// One cycle; on a failed solve everything is rolled back to the cycle start.
     fn run_cycle(&mut self, period: f64, cmd: &MotorCommand) -> Result<(), StaticsError> {
+        self.run_cycle_until(period, cmd, f64::INFINITY)
+    }
+
+    /// One cycle of `period` planned from the present, simulated only up to `until` (a
+    /// firmware that gets its next command early starts the next segment there); on a failed
+    /// solve everything is rolled back to the cycle start.
+    fn run_cycle_until(
+        &mut self,
+        period: f64,
+        cmd: &MotorCommand,
+        until: f64,
+    ) -> Result<(), StaticsError> {
         let t0 = self.state.t_s;
-        let backup = (
-            self.act.clone(),
-            self.creep,
-            self.anchors,
-            self.state.clone(),
-        );
-        let marks = (
-            self.history.len(),
-            self.measurements.len(),
-            self.next_sample,
-        );
+        let record = CycleRecord {
+            act: self.act.clone(),
+            creep: self.creep,
+            anchors: self.anchors,
+            state: self.state.clone(),
+            history_len: self.history.len(),
+            measurements_len: self.measurements.len(),
+            next_sample: self.next_sample,
+            period,
+            cmd: *cmd,
+        };
         let mut limited = false;
         for (i, a) in self.act.iter_mut().enumerate() {
             let target = if cmd.enable { cmd.steps[i] } else { a.counter };
@@ -282,18 +312,68 @@ impl Plant {
         self.limited = limited;
         let n = self.cfg.simulation.substeps_per_cycle.max(1);
         for k in 1..=n {
-            let t = t0 + period * k as f64 / n as f64;
-            if let Err(e) = self.substep(t, period / n as f64) {
-                (self.act, self.creep, self.anchors, self.state) = backup;
-                self.history.truncate(marks.0.min(self.history.len()));
-                self.measurements
-                    .truncate(marks.1.min(self.measurements.len()));
-                self.next_sample = marks.2;
-                self.jac_cache = None;
+            let tk = t0 + period * k as f64 / n as f64;
+            let (t, dt) = if tk <= until + 1e-12 {
+                (tk, period / n as f64)
+            } else {
+                (until, until - self.state.t_s)
+            };
+            if dt <= 1e-12 {
+                break;
+            }
+            if let Err(e) = self.substep(t, dt) {
+                self.restore(&record);
                 return Err(e);
             }
+            if t >= until {
+                break;
+            }
         }
+        self.last_cycle = Some(record);
         Ok(())
+    }
+
+    /// Puts the plant back to the start of a recorded cycle.
+    fn restore(&mut self, r: &CycleRecord) {
+        self.act = r.act.clone();
+        self.creep = r.creep;
+        self.anchors = r.anchors;
+        self.state = r.state.clone();
+        self.history.truncate(r.history_len.min(self.history.len()));
+        self.measurements
+            .truncate(r.measurements_len.min(self.measurements.len()));
+        self.next_sample = r.next_sample;
+        self.jac_cache = None;
+    }
+
+    /// Takes back the part of the last cycle after `t` (a time inside it): the plant is put
+    /// back to the cycle's start and the cycle is simulated again up to `t` only, as a firmware
+    /// that receives its next command early starts the next segment from where the motors are.
+    /// Without this, a command that comes early (a late one followed by one on time) would leave
+    /// the plant a cycle ahead of the clock for good, its motion late against the commands.
+    /// Returns the start time of the cycle taken back (measurements after it are made again:
+    /// a caller that drained some must drop those later than this). `None` when `t` is not
+    /// inside the last cycle (nothing is changed then).
+    pub fn rewind_to(&mut self, t: f64) -> Result<Option<f64>, PlantError> {
+        let Some(r) = self.last_cycle.take() else {
+            return Ok(None);
+        };
+        let t0 = r.state.t_s;
+        if !(t + 1e-9 < self.state.t_s && t >= t0 - 1e-9) {
+            self.last_cycle = Some(r);
+            return Ok(None);
+        }
+        self.restore(&r);
+        if t > t0 + 1e-12 && self.run_cycle_until(r.period, &r.cmd, t).is_err() {
+            // As a failed cycle: hold the motors where they are up to `t`.
+            let hold = MotorCommand {
+                steps: self.state.counter,
+                enable: r.cmd.enable,
+            };
+            self.run_cycle(t - t0, &hold)?;
+            self.fault = true;
+        }
+        Ok(Some(t0))
     }
 
     /// Lets time pass without new steps until `t` (whole sub-steps of the cycle length).

@@ -373,3 +373,48 @@ fn a_setpoint_without_equilibrium_faults_and_holds() {
     let st = plant.read(2.0 * CYCLE, CYCLE).unwrap();
     assert!(!st.fault && st.steps[0] == home[0] + 5);
 }
+
+#[test]
+fn an_early_command_takes_back_the_rest_of_the_cycle_and_the_plant_keeps_to_the_clock() {
+    // Every tenth command comes 12 ms late and the next one on time, i.e. early against the
+    // end of the late cycle. The plant takes back the rest of the late cycle each time (as a
+    // driver does, `rewind_to` before `write`), so it never runs ahead of the clock, its
+    // measurements stay in time order, and it ends where a punctual plant ends.
+    let mut plant = ideal_with(|_| {});
+    let mut punctual = ideal_with(|_| {});
+    let home = plant.home_steps();
+    let mut meas: Vec<pcr_plant::Measurement> = Vec::new();
+    let mut rewinds = 0;
+    for k in 0..100 {
+        let t = k as f64 * CYCLE + if k % 10 == 3 { 0.012 } else { 0.0 };
+        let c = cmd(wave(home, k as f64 * CYCLE, 60.0));
+        if let Some(t0) = plant.rewind_to(t).unwrap() {
+            rewinds += 1;
+            meas.retain(|m| m.t_s <= t0 + 1e-12);
+        }
+        plant.write(t, CYCLE, &c).unwrap();
+        meas.extend(plant.drain_measurements());
+        punctual.write(k as f64 * CYCLE, CYCLE, &c).unwrap();
+        assert!(
+            plant.time() <= t + CYCLE + 1e-9,
+            "cycle {k}: the plant is at {} s, ahead of the command at {t} s",
+            plant.time()
+        );
+    }
+    assert_eq!(rewinds, 10, "each late command is followed by an early one");
+    assert!(meas.windows(2).all(|w| w[0].t_s < w[1].t_s), "time order");
+    // Settled at the last target, both plants are at the same pose.
+    plant.idle_until(3.0).unwrap();
+    punctual.idle_until(3.0).unwrap();
+    let last = |p: &mut Plant| {
+        p.drain_measurements()
+            .into_iter()
+            .rev()
+            .find_map(|m| m.pose)
+            .unwrap()
+    };
+    let (a, b) = (last(&mut plant), last(&mut punctual));
+    for i in 0..3 {
+        assert!((a[i] - b[i]).abs() < 1e-6, "{a:?} vs {b:?}");
+    }
+}

@@ -9,7 +9,6 @@
 
 use anyhow::{anyhow, Context, Result};
 use clap::{Parser, ValueEnum};
-use iceoryx2::prelude::*;
 use pcr_control::{
     max_step_rate, plant_backend, safety_stack, DriverStep, FkPoseSensor, IdealDrive, NoPoseSensor,
     PlantDrive, PoseSensor, SafeDriver,
@@ -22,6 +21,7 @@ use pcr_messages::{
 };
 use pcr_mocap_bridge::{QtmServer, ServerConfig};
 use pcr_nodes::cycle::{driver_on_setpoint, driver_run};
+use pcr_nodes::hop::{self, Ticker};
 use pcr_nodes::{ports::latest, publish, ChainNode, CommonArgs, CycleStats, ProtocolGuard};
 use pcr_plant::PlantConfig;
 use pcr_robot::RobotConfig;
@@ -275,7 +275,7 @@ fn serve<D: Driver, P: PoseSensor>(
 ) -> Result<()> {
     let kind = NodeKind::Driver;
     let sub = cn.subscriber::<JointSetpoint>(s::JOINT_SETPOINT)?;
-    let listener = cn.listener(s::JOINT_SETPOINT)?;
+    let listener = cn.hop_listener(s::JOINT_SETPOINT)?;
     let pub_st = cn.publisher::<DriverStateMsg>(s::DRIVER_STATE)?;
     let notify = cn.notifier(s::DRIVER_STATE)?;
     let pub_hb = cn.publisher::<Heartbeat>(s::HEARTBEAT)?;
@@ -285,57 +285,53 @@ fn serve<D: Driver, P: PoseSensor>(
     let mut stats = CycleStats::new(kind, c.protocol_version, period_ns);
     let mut fresh_since_tick = false;
     let mut fatal: Option<anyhow::Error> = None;
-    let mut sigusr1_installed = false;
 
-    let ws = WaitSetBuilder::new()
-        .create::<ipc::Service>()
-        .map_err(|e| anyhow!("waitset: {e:?}"))?;
-    let ev = ws
-        .attach_notification(&listener)
-        .map_err(|e| anyhow!("attach: {e:?}"))?;
-    let tick = ws
-        .attach_interval(c.period())
-        .map_err(|e| anyhow!("interval: {e:?}"))?;
-    let hb = ws
-        .attach_interval(c.heartbeat())
-        .map_err(|e| anyhow!("interval: {e:?}"))?;
+    hop::catch_termination()?;
+    if qtm.is_some() {
+        // SIGUSR1 restarts the simulated QTM (seen at the next heartbeat).
+        // SAFETY: the handler only stores to an atomic.
+        unsafe {
+            libc::signal(
+                libc::SIGUSR1,
+                on_sigusr1 as extern "C" fn(libc::c_int) as libc::sighandler_t,
+            )
+        };
+    }
+    let _ticker = Ticker::spawn(
+        &format!("pcr-driver-ticker-{}", std::process::id()),
+        &c.prefix,
+        c.protocol_version,
+        s::JOINT_SETPOINT,
+        Some(c.period()),
+        c.heartbeat(),
+    )?;
 
-    let r = pcr_nodes::run_waitset(&ws, |id| {
-        if id.has_event_from(&ev) {
-            if let Some((rx, hop, r)) =
-                driver_on_setpoint(&listener, &sub, &mut step, &pub_st, &notify)
-            {
+    loop {
+        let w = hop::wait(&listener)?;
+        if w.terminate {
+            break;
+        }
+        if w.sample {
+            if let Some((rx, latency, r)) = driver_on_setpoint(&sub, &mut step, &pub_st, &notify) {
                 fresh_since_tick = true;
                 if let Err(e) = r {
                     fatal = Some(e);
-                    return CallbackProgression::Stop;
+                    break;
                 }
-                stats.record(monotonic_ns() - rx, hop);
+                stats.record(monotonic_ns() - rx, latency);
             }
         }
-        if id.has_event_from(&tick) {
+        if w.tick {
             if !fresh_since_tick {
                 stats.stale_input();
                 if let Err(e) = driver_run(&mut step, None, &pub_st, &notify) {
                     fatal = Some(e);
-                    return CallbackProgression::Stop;
+                    break;
                 }
             }
             fresh_since_tick = false;
         }
-        if id.has_event_from(&hb) {
-            if qtm.is_some() && !sigusr1_installed {
-                // After iceoryx2's own signal handling is set up (it claims every non-fatal
-                // signal when first used): SIGUSR1 restarts the simulated QTM.
-                // SAFETY: the handler only stores to an atomic.
-                unsafe {
-                    libc::signal(
-                        libc::SIGUSR1,
-                        on_sigusr1 as extern "C" fn(libc::c_int) as libc::sighandler_t,
-                    )
-                };
-                sigusr1_installed = true;
-            }
+        if w.heartbeat {
             if QTM_RESTART.swap(false, std::sync::atomic::Ordering::SeqCst) {
                 if let Some(q) = &qtm {
                     tracing::warn!("SIGUSR1: the simulated QTM restarts (down for 1 s)");
@@ -345,10 +341,8 @@ fn serve<D: Driver, P: PoseSensor>(
             let _ = publish(&pub_hb, stats.heartbeat(step.holding()));
             pcr_nodes::recheck(&guard);
         }
-        CallbackProgression::Continue
-    })
-    .map_err(|e| anyhow!("waitset: {e:?}"))?;
-    pcr_nodes::log_end(kind, r);
+    }
+    tracing::info!(kind = kind.name(), "loop ended");
     if fatal.is_none() {
         // Terminated (the supervisor stops the chain, or died: SIGTERM by PR_SET_PDEATHSIG):
         // the last command to the drive holds the motors where they are.

@@ -1,12 +1,13 @@
-//! `pcr-ik`: the IK process. Wakes on the task-setpoint event, solves the newest setpoint and
-//! publishes the joint setpoint (+ event); heartbeats on an interval.
+//! `pcr-ik`: the IK process. Wakes on the task-setpoint event (its hop listener,
+//! [`pcr_nodes::hop`]), solves the newest setpoint and publishes the joint setpoint (+ event);
+//! heartbeats when its ticker says so.
 
 use anyhow::{anyhow, Context, Result};
 use clap::Parser;
-use iceoryx2::prelude::*;
 use pcr_control::IkStep;
 use pcr_kinematics::Robot;
 use pcr_messages::{monotonic_ns, services as s, Heartbeat, JointSetpoint, NodeKind, TaskSetpoint};
+use pcr_nodes::hop::{self, Ticker};
 use pcr_nodes::{cycle::ik_on_setpoint, publish, CommonArgs, CycleStats};
 use pcr_robot::RobotConfig;
 
@@ -35,9 +36,9 @@ fn run(a: Args) -> Result<()> {
     let robot = Robot::new(&robot_cfg).map_err(|e| anyhow!("robot model: {e}"))?;
     let (cn, guard) = pcr_nodes::startup(kind, c)?;
     let sub = cn.subscriber::<TaskSetpoint>(s::TASK_SETPOINT)?;
-    let listener = cn.listener(s::TASK_SETPOINT)?;
+    let listener = cn.hop_listener(s::TASK_SETPOINT)?;
     let pub_j = cn.publisher::<JointSetpoint>(s::JOINT_SETPOINT)?;
-    let notify = cn.notifier(s::JOINT_SETPOINT)?;
+    let notify = cn.hop_notifier(s::JOINT_SETPOINT)?;
     let pub_hb = cn.publisher::<Heartbeat>(s::HEARTBEAT)?;
     pcr_nodes::realtime::apply(c.rt_priority, c.cpu, c.mlockall);
 
@@ -46,24 +47,28 @@ fn run(a: Args) -> Result<()> {
     let mut stats = CycleStats::new(kind, c.protocol_version, period_ns);
     let mut last_rx = monotonic_ns();
 
-    let ws = WaitSetBuilder::new()
-        .create::<ipc::Service>()
-        .map_err(|e| anyhow!("waitset: {e:?}"))?;
-    let ev = ws
-        .attach_notification(&listener)
-        .map_err(|e| anyhow!("attach: {e:?}"))?;
-    let hb = ws
-        .attach_interval(c.heartbeat())
-        .map_err(|e| anyhow!("interval: {e:?}"))?;
+    hop::catch_termination()?;
+    let _ticker = Ticker::spawn(
+        &format!("pcr-ik-ticker-{}", std::process::id()),
+        &c.prefix,
+        c.protocol_version,
+        s::TASK_SETPOINT,
+        None,
+        c.heartbeat(),
+    )?;
 
-    let r = pcr_nodes::run_waitset(&ws, |id| {
-        if id.has_event_from(&ev) {
-            if let Some((rx, hop)) = ik_on_setpoint(&listener, &sub, &mut ik, &pub_j, &notify) {
+    loop {
+        let w = hop::wait(&listener)?;
+        if w.terminate {
+            break;
+        }
+        if w.sample {
+            if let Some((rx, latency)) = ik_on_setpoint(&sub, &mut ik, &pub_j, &notify) {
                 last_rx = rx;
-                stats.record(monotonic_ns() - rx, hop);
+                stats.record(monotonic_ns() - rx, latency);
             }
         }
-        if id.has_event_from(&hb) {
+        if w.heartbeat {
             let stale = monotonic_ns() - last_rx > 2 * period_ns;
             if stale {
                 stats.stale_input();
@@ -71,10 +76,8 @@ fn run(a: Args) -> Result<()> {
             let _ = publish(&pub_hb, stats.heartbeat(stale));
             pcr_nodes::recheck(&guard);
         }
-        CallbackProgression::Continue
-    })
-    .map_err(|e| anyhow!("waitset: {e:?}"))?;
-    pcr_nodes::log_end(kind, r);
+    }
+    tracing::info!(kind = kind.name(), "terminating cleanly");
     eprintln!("{} ({} IK failures)", stats.summary(), ik.failures());
     Ok(())
 }

@@ -106,7 +106,7 @@ fn run(a: Args) -> Result<()> {
     let robot = Robot::new(&robot_cfg).map_err(|e| anyhow!("robot model: {e}"))?;
     let (cn, guard) = pcr_nodes::startup(kind, c)?;
     let pub_sp = cn.publisher::<TaskSetpoint>(s::TASK_SETPOINT)?;
-    let notify = cn.notifier(s::TASK_SETPOINT)?;
+    let notify = cn.hop_notifier(s::TASK_SETPOINT)?;
     let pub_status = cn.publisher::<PlannerStatus>(s::STATUS)?;
     let pub_refusal = cn.publisher::<Refusal>(s::REFUSAL)?;
     // Whoever asked learns why a command was refused (the supervisor, `ctl run`).

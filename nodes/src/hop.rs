@@ -1,0 +1,284 @@
+//! The chain's hot hops (planner -> IK, IK -> driver): how a downstream stage sleeps and wakes.
+//!
+//! The IK and the driver wait on their one hop listener itself ([`wait`]), not on a WaitSet: a
+//! WaitSet wake-up costs an `epoll_wait`, an `fcntl(F_GETFD)` (iceoryx2's reactor checks the
+//! triggered descriptor) and its bookkeeping before the listener is drained, which is most of
+//! what separated an iceoryx2 hop from a Unix-socket hop (BENCHMARKS.md, "Issue 13 item 3").
+//! Their periodic work (the driver's period tick, every stage's heartbeat) arrives as events on
+//! the same listener: a [`Ticker`] thread of the process notifies its own listener with
+//! [`TICK`] and [`HEARTBEAT`] at absolute CLOCK_MONOTONIC times, so the stage still sleeps in one
+//! place, and every step still runs on the main thread.
+//!
+//! SIGINT/SIGTERM: [`catch_termination`] installs a handler without `SA_RESTART` (iceoryx2's own
+//! restarts the interrupted call, and a blocking `recvfrom` would then sleep on), so the signal
+//! interrupts the wait and [`wait`] reports it as [`Wake::terminate`]. The ticker thread blocks
+//! every signal, so that they reach the main thread; should one land on another thread, the
+//! ticker sees the request at its next release and wakes the main thread.
+
+use crate::ports::ChainNode;
+use anyhow::{anyhow, Result};
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::prelude::EventId;
+use iceoryx2_bb_elementary_traits::testing::abandonable::Abandonable;
+use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
+use iceoryx2_cal::shm_allocator::bump_allocator::BumpAllocator;
+use iceoryx2_cal::shm_allocator::pool_allocator::PoolAllocator;
+use std::fmt::Debug;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+
+/// The iceoryx2 service type of the hop events (the event mechanism of the hot path): iceoryx2's
+/// `ipc::Service` with one concept exchanged, the event: a process-shared POSIX semaphore in the
+/// event's shared-memory segment (`SemaphoreShmCountingBitSet`) instead of a Unix datagram
+/// socket. A notification is then a `sem_post` (one `futex` wake when the listener sleeps, none
+/// otherwise), the wait a `sem_wait`, and the drain a `sem_trywait` in user space, where the
+/// socket costs a `sendto`, a `recvfrom` and a second `recvfrom` to find the socket empty.
+/// Such a listener has no file descriptor and cannot join a WaitSet, which is why the IK and
+/// the driver wait on it alone ([`wait`]). Everything else (samples, the other events) stays
+/// on `ipc::Service`.
+#[derive(Debug, Clone)]
+pub struct HopService {}
+
+impl iceoryx2::service::Service for HopService {
+    type StaticStorage = iceoryx2_cal::static_storage::recommended::Ipc;
+    type ConfigSerializer = iceoryx2_cal::serialize::recommended::Recommended;
+    type PersistentDynamicStorage<T: Debug + Send + Sync + ZeroCopySend + 'static> =
+        iceoryx2_cal::dynamic_storage::recommended::PersistentIpc<T>;
+    type Bag = iceoryx2_cal::bag::recommended::Recommended;
+    type DynamicStorage<T: Debug + Send + Sync + ZeroCopySend + 'static> =
+        iceoryx2_cal::dynamic_storage::recommended::Ipc<T>;
+    type ServiceNameHasher = iceoryx2_cal::hash::recommended::Recommended;
+    type SharedMemory = iceoryx2_cal::shared_memory::recommended::Ipc<PoolAllocator>;
+    type ResizableSharedMemory =
+        iceoryx2_cal::resizable_shared_memory::recommended::Ipc<PoolAllocator>;
+    type Connection = iceoryx2_cal::zero_copy_connection::recommended::Ipc;
+    type Event = iceoryx2_cal::event::SemaphoreShmCountingBitSet;
+    type Monitoring = iceoryx2_cal::monitoring::recommended::Ipc;
+    type Reactor = iceoryx2_cal::reactor::recommended::Ipc;
+    type ArcThreadSafetyPolicy<T: Send + Debug + Abandonable> =
+        iceoryx2_cal::arc_sync_policy::single_threaded::SingleThreaded<T>;
+    type BlackboardMgmt<KeyType: Send + Sync + Debug + ZeroCopySend + 'static> =
+        iceoryx2_cal::dynamic_storage::recommended::Ipc<KeyType>;
+    type BlackboardPayload = iceoryx2_cal::shared_memory::recommended::Ipc<BumpAllocator>;
+    type UniqueId = iceoryx2::unique_id_generator::unique_system_id::UniqueSystemId;
+}
+
+impl iceoryx2::service::internal::ServiceInternal<HopService> for HopService {}
+
+/// The event of a new sample from upstream (the notifiers' default id).
+pub const SAMPLE: EventId = EventId::new(0);
+/// The stage's period tick (from its [`Ticker`]).
+pub const TICK: EventId = EventId::new(1);
+/// The stage's heartbeat time (from its [`Ticker`]).
+pub const HEARTBEAT: EventId = EventId::new(2);
+/// The largest event id a hop service carries.
+pub const MAX_EVENT_ID: usize = 2;
+
+/// What woke the stage.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Wake {
+    /// A new sample from upstream.
+    pub sample: bool,
+    /// The period tick.
+    pub tick: bool,
+    /// The heartbeat time.
+    pub heartbeat: bool,
+    /// SIGINT/SIGTERM arrived: end the loop.
+    pub terminate: bool,
+}
+
+impl Wake {
+    fn note(&mut self, id: EventId) {
+        match id.as_value() {
+            0 => self.sample = true,
+            1 => self.tick = true,
+            2 => self.heartbeat = true,
+            _ => {}
+        }
+    }
+}
+
+/// Sleeps on the hop listener until something arrives, drains every pending event and says what
+/// woke the stage. A signal that interrupts the wait without a termination request (SIGCONT
+/// after SIGSTOP, SIGUSR1) is a wake-up with nothing set.
+pub fn wait(listener: &Listener<HopService>) -> Result<Wake> {
+    let mut w = Wake::default();
+    match listener.blocking_wait(|a| w.note(a.id)) {
+        Ok(_) => {}
+        Err(iceoryx2::port::listener::ListenerWaitError::InterruptSignal) => {}
+        Err(e) => return Err(anyhow!("hop listener: {e:?}")),
+    }
+    w.terminate = termination_requested();
+    Ok(w)
+}
+
+static TERMINATE: AtomicBool = AtomicBool::new(false);
+
+extern "C" fn on_termination(_: libc::c_int) {
+    TERMINATE.store(true, Ordering::SeqCst);
+}
+
+/// Catches SIGINT and SIGTERM for [`wait`]: call once at start-up, before the first wait (and
+/// never use an iceoryx2 WaitSet in the same process: its signal handler would replace this
+/// one).
+pub fn catch_termination() -> Result<()> {
+    for sig in [libc::SIGINT, libc::SIGTERM] {
+        // SAFETY: sigaction with a handler that only stores to an atomic; no SA_RESTART.
+        let r = unsafe {
+            let mut sa: libc::sigaction = std::mem::zeroed();
+            sa.sa_sigaction = on_termination as extern "C" fn(libc::c_int) as libc::sighandler_t;
+            libc::sigemptyset(&mut sa.sa_mask);
+            sa.sa_flags = 0;
+            libc::sigaction(sig, &sa, std::ptr::null_mut())
+        };
+        if r != 0 {
+            return Err(anyhow!(
+                "cannot catch signal {sig}: {}",
+                std::io::Error::last_os_error()
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// True once SIGINT or SIGTERM arrived (after [`catch_termination`]).
+pub fn termination_requested() -> bool {
+    TERMINATE.load(Ordering::SeqCst)
+}
+
+/// Drains the hop listener without blocking and says what was pending.
+pub fn poll(listener: &Listener<HopService>) -> Result<Wake> {
+    let mut w = Wake::default();
+    listener
+        .try_wait(|a| w.note(a.id))
+        .map_err(|e| anyhow!("hop listener: {e:?}"))?;
+    w.terminate = termination_requested();
+    Ok(w)
+}
+
+/// A thread that notifies a process's own hop listener with [`TICK`] every `tick` (if any) and
+/// [`HEARTBEAT`] every `heartbeat`, at absolute CLOCK_MONOTONIC times (no drift). Stops and
+/// joins when dropped (within one of its periods).
+#[derive(Debug)]
+pub struct Ticker {
+    stop: Arc<AtomicBool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Ticker {
+    /// Starts the thread; it opens its own iceoryx2 node (`name`) under `prefix` and a notifier
+    /// on the hop service `base`. Call after the real-time settings: the thread inherits the
+    /// process's scheduling class, priority and CPU.
+    pub fn spawn(
+        name: &str,
+        prefix: &str,
+        version: u32,
+        base: &'static str,
+        tick: Option<Duration>,
+        heartbeat: Duration,
+    ) -> Result<Self> {
+        let stop = Arc::new(AtomicBool::new(false));
+        let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<(), String>>();
+        let (name, prefix, s) = (name.to_string(), prefix.to_string(), stop.clone());
+        let thread = std::thread::Builder::new()
+            .name("ticker".into())
+            .spawn(move || {
+                block_all_signals();
+                let notifier = ChainNode::new(&name, &prefix, version)
+                    .and_then(|cn| Ok((cn.hop_notifier(base)?, cn)));
+                let (notifier, _cn) = match notifier {
+                    Ok(n) => {
+                        let _ = ready_tx.send(Ok(()));
+                        n
+                    }
+                    Err(e) => {
+                        let _ = ready_tx.send(Err(format!("{e:#}")));
+                        return;
+                    }
+                };
+                run_ticker(&notifier, &s, tick, heartbeat);
+            })
+            .map_err(|e| anyhow!("ticker thread: {e}"))?;
+        match ready_rx.recv() {
+            Ok(Ok(())) => Ok(Self {
+                stop,
+                thread: Some(thread),
+            }),
+            Ok(Err(e)) => Err(anyhow!("ticker: {e}")),
+            Err(_) => Err(anyhow!("ticker thread ended before it was ready")),
+        }
+    }
+}
+
+impl Drop for Ticker {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::SeqCst);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+fn block_all_signals() {
+    // SAFETY: sigset_t is plain data; pthread_sigmask only affects this thread.
+    unsafe {
+        let mut set: libc::sigset_t = std::mem::zeroed();
+        libc::sigfillset(&mut set);
+        libc::pthread_sigmask(libc::SIG_BLOCK, &set, std::ptr::null_mut());
+    }
+}
+
+fn sleep_until_ns(t_ns: u64) {
+    let ts = libc::timespec {
+        tv_sec: (t_ns / 1_000_000_000) as libc::time_t,
+        tv_nsec: (t_ns % 1_000_000_000) as libc::c_long,
+    };
+    // SAFETY: plain syscall; EINTR cannot happen (every signal is blocked here), and an early
+    // return is harmless (the caller checks the time).
+    unsafe {
+        libc::clock_nanosleep(
+            libc::CLOCK_MONOTONIC,
+            libc::TIMER_ABSTIME,
+            &ts,
+            std::ptr::null_mut(),
+        )
+    };
+}
+
+fn run_ticker(
+    notifier: &Notifier<HopService>,
+    stop: &AtomicBool,
+    tick: Option<Duration>,
+    heartbeat: Duration,
+) {
+    let now = pcr_messages::monotonic_ns();
+    let tick_ns = tick.map(|t| (t.as_nanos() as u64).max(1));
+    let hb_ns = (heartbeat.as_nanos() as u64).max(1);
+    let mut next_tick = tick_ns.map(|p| now + p);
+    let mut next_hb = now + hb_ns;
+    while !stop.load(Ordering::Relaxed) {
+        let due = next_tick.map_or(next_hb, |t| t.min(next_hb));
+        sleep_until_ns(due);
+        let now = pcr_messages::monotonic_ns();
+        if stop.load(Ordering::Relaxed) {
+            break;
+        }
+        if termination_requested() {
+            // The signal reached another thread: wake the main thread to see it.
+            let _ = notifier.notify_with_custom_event_id(HEARTBEAT);
+        }
+        if let (Some(t), Some(p)) = (next_tick.as_mut(), tick_ns) {
+            if now >= *t {
+                let _ = notifier.notify_with_custom_event_id(TICK);
+                // The next release after now (missed releases are not replayed).
+                *t += p * ((now - *t) / p + 1);
+            }
+        }
+        if now >= next_hb {
+            let _ = notifier.notify_with_custom_event_id(HEARTBEAT);
+            next_hb += hb_ns * ((now - next_hb) / hb_ns + 1);
+        }
+    }
+}
