@@ -67,7 +67,8 @@ struct Args {
     #[arg(long)]
     no_uds: bool,
     /// Instead of the chain: profile the user-space parts of one hop, this many times per
-    /// transport, in one process (publish, notify, WaitSet wake-up, event drain, receive vs the
+    /// transport, in one process (publish, notify, wake-up and event drain as it was with a
+    /// WaitSet and as the chain does it now on the hop listener, receive; vs the
     /// socket's send and receive), one hop every `--period-ms` so that the load between hops
     /// cools the caches as it does in the chain. The kernel's wake-up of the blocked receiver
     /// is not in it (both transports wake it through a Unix datagram socket).
@@ -609,10 +610,57 @@ fn hop_profile(a: &Args, n: u64) -> Result<()> {
         }
     }
     pcr_nodes::ports::remove_leftovers(&prefix);
-    println!("\n## iceoryx2 hop, user space\n");
+    println!("\n## iceoryx2 hop, user space, as it was: socket event (ipc::Service), WaitSet\n");
     println!("| part | p50 us | p99 us | p99.9 us | max us |");
     println!("|---|---:|---:|---:|---:|");
     for (name, h) in names.iter().zip(&hs) {
+        row(name, h);
+    }
+    // The chain's hop now: semaphore event (pcr_nodes::hop::HopService), waited on alone.
+    let hnames = [
+        "publish (loan, write in place, send)",
+        "notify (sem_post)",
+        "wait on the hop listener and drain (hop::wait: sem_wait returns at once)",
+        "receive the newest sample (latest)",
+        "total",
+    ];
+    let mut hh: Vec<Histogram<u64>> = hnames.iter().map(|_| new_h()).collect();
+    {
+        let cn = ChainNode::new("pcr-hop", &prefix, PROTOCOL_VERSION)?;
+        let p = cn.publisher::<TaskSetpoint>("hop-profile")?;
+        let sub = cn.subscriber::<TaskSetpoint>("hop-profile")?;
+        let notifier = cn.hop_notifier("hop-profile")?;
+        let listener = cn.hop_listener("hop-profile")?;
+        for i in 0..n + 50 {
+            std::thread::sleep(period);
+            let sp = TaskSetpoint {
+                seq: i,
+                ..Default::default()
+            };
+            let t0 = monotonic_ns();
+            let _ = pcr_nodes::publish(&p, sp);
+            let t1 = monotonic_ns();
+            let _ = notifier.notify();
+            let t2 = monotonic_ns();
+            let w = pcr_nodes::hop::wait(&listener)?;
+            let t3 = monotonic_ns();
+            let _ = pcr_nodes::ports::latest(&sub);
+            let t4 = monotonic_ns();
+            if i >= 50 && w.sample {
+                for (h, x) in hh
+                    .iter_mut()
+                    .zip([t1 - t0, t2 - t1, t3 - t2, t4 - t3, t4 - t0])
+                {
+                    h.saturating_record(x.max(1));
+                }
+            }
+        }
+    }
+    pcr_nodes::ports::remove_leftovers(&prefix);
+    println!("\n## iceoryx2 hop, user space, the chain's now: semaphore event, hop listener\n");
+    println!("| part | p50 us | p99 us | p99.9 us | max us |");
+    println!("|---|---:|---:|---:|---:|");
+    for (name, h) in hnames.iter().zip(&hh) {
         row(name, h);
     }
     // The socket: send a datagram of the same size, receive it (blocking recv, data present).
