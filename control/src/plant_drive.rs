@@ -43,6 +43,8 @@ pub struct PlantDrive {
     /// The samples handed out by the last `read`, robot frame, stamped with the time they were
     /// reported on the caller's clock.
     samples: Vec<pcr_plant::Measurement>,
+    /// The command of the cycle the plant runs.
+    last_cmd: Option<MotorCommand>,
 }
 
 /// The plant's motion-capture view, as the driver step's pose sensor.
@@ -68,6 +70,7 @@ pub fn plant_backend(
             qtm: None,
             pending: std::collections::VecDeque::new(),
             samples: Vec::new(),
+            last_cmd: None,
         },
         PlantSensor { last },
     ))
@@ -125,9 +128,15 @@ impl Driver for PlantDrive {
 
     fn write(&mut self, time_s: f64, period_s: f64, cmd: &MotorCommand) -> Result<(), DriverError> {
         let t = self.plant_time(time_s);
-        // A command earlier than the end of the last cycle (the one before came late): the
-        // plant takes back the rest of that cycle, as the firmware starts the new segment at
-        // once; otherwise the plant would run a cycle ahead of the clock from then on.
+        // A command earlier than the end of the last cycle (the one before came late), as the
+        // firmware treats it: an unchanged target lets the running segment finish (nothing to
+        // do: the plant has simulated it); a new target starts a new segment at once, so the
+        // plant takes back the rest of that cycle. Otherwise the plant would run a cycle ahead
+        // of the clock from then on.
+        if t + 1e-9 < self.plant.time() && self.last_cmd.as_ref() == Some(cmd) {
+            return Ok(());
+        }
+        self.last_cmd = Some(*cmd);
         if let Some(t0) = self
             .plant
             .rewind_to(t)
@@ -182,5 +191,53 @@ impl PoseSensor for PlantSensor {
 
     fn measure(&mut self, _time_s: f64, _state: &DriverState) -> Option<Pose> {
         self.last.take()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_early_command_follows_the_firmware_rule() {
+        let (mut d, _s) =
+            plant_backend(&RobotConfig::nominal(), &PlantConfig::ideal()).expect("plant");
+        let home = d.home_steps();
+        let a = MotorCommand {
+            steps: [home[0] + 20, home[1] - 10, home[2]],
+            enable: true,
+        };
+        let b = MotorCommand {
+            steps: [home[0] + 30, home[1] - 15, home[2] + 5],
+            enable: true,
+        };
+        let t0 = 100.0; // a process clock far from 0
+        d.write(t0, 0.02, &a).unwrap();
+        d.read(t0, 0.02).unwrap();
+        let end = d.plant.time();
+        assert!((end - 0.02).abs() < 1e-9, "{end}");
+        // The same target early: the running segment finishes, nothing is simulated again.
+        d.write(t0 + 0.005, 0.02, &a).unwrap();
+        assert_eq!(d.plant.time(), end);
+        // A new target early: a new segment from now, the plant one period ahead of now only.
+        d.write(t0 + 0.010, 0.02, &b).unwrap();
+        assert!((d.plant.time() - 0.030).abs() < 1e-9, "{}", d.plant.time());
+        // Samples reach the caller in time order, none from the future.
+        let mut last = f64::NEG_INFINITY;
+        for k in 1..20 {
+            let t = t0 + 0.010 + 0.02 * k as f64;
+            d.write(t, 0.02, &b).unwrap();
+            d.read(t, 0.02).unwrap();
+            for m in d.samples() {
+                assert!(
+                    m.t_s > last && m.t_s <= t + 1e-9,
+                    "{} after {last} at {t}",
+                    m.t_s
+                );
+                last = m.t_s;
+            }
+        }
+        let st = d.read(t0 + 0.5, 0.02).unwrap();
+        assert_eq!(st.steps, b.steps);
     }
 }
