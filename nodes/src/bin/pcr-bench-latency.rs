@@ -32,7 +32,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
 
-#[derive(Parser, Debug)]
+#[derive(Parser, Debug, Clone)]
 #[command(about = "Per-hop and end-to-end latency of the chain: iceoryx2 vs Unix sockets")]
 struct Args {
     /// Cycles to measure per transport.
@@ -66,6 +66,11 @@ struct Args {
     /// Skip the UDS baseline.
     #[arg(long)]
     no_uds: bool,
+    /// Measure in this many alternating blocks (iceoryx2, sockets, iceoryx2, ...) of
+    /// `--cycles / --rounds` cycles each and merge them, so that both transports see the same
+    /// drift of the machine's load; 1 = one block each.
+    #[arg(long, default_value_t = 1)]
+    rounds: u64,
     /// Instead of the chain: profile the user-space parts of one hop, this many times per
     /// transport, in one process (publish, notify, wake-up and event drain as it was with a
     /// WaitSet and as the chain does it now on the hop listener, receive; vs the
@@ -130,6 +135,15 @@ impl Hists {
         }
         self.last_seq = Some(seq);
         self.cycles += 1;
+    }
+    /// Adds another block's figures.
+    fn merge(&mut self, o: &Hists) {
+        for (h, x) in self.h.iter_mut().zip(&o.h) {
+            let _ = h.add(x);
+        }
+        self.cycles += o.cycles;
+        self.late += o.late;
+        self.lost += o.lost;
     }
     fn print(&self, title: &str, extra: &str) {
         println!("\n## {title}\n");
@@ -223,16 +237,39 @@ fn bench(a: &Args) -> Result<()> {
         a.cpu_dma_latency.map_or("-".to_string(), |c| c.to_string()),
         std::thread::available_parallelism().map_or(0, |n| n.get())
     );
-    let ice = bench_iceoryx2(a, period_ns)?;
-    ice.0.print(
+    let rounds = a.rounds.max(1);
+    let block = Args {
+        cycles: a.cycles.div_ceil(rounds),
+        ..a.clone()
+    };
+    let (mut ice, mut ice_misses) = (Hists::new(), 0);
+    let (mut uds, mut uds_late) = (Hists::new(), 0);
+    for r in 0..rounds {
+        if rounds > 1 {
+            eprintln!("round {} of {rounds}", r + 1);
+        }
+        let (h, m) = bench_iceoryx2(&block, period_ns)?;
+        ice.merge(&h);
+        ice_misses += m;
+        if !a.no_uds {
+            let (h, l) = bench_uds(&block, period_ns)?;
+            uds.merge(&h);
+            uds_late += l;
+        }
+    }
+    let blocks = if rounds > 1 {
+        format!(" ({rounds} blocks alternating with the other transport)")
+    } else {
+        String::new()
+    };
+    ice.print(
         "iceoryx2 (zero-copy shared memory, event-driven)",
-        &format!(", process deadline misses (heartbeats) {}", ice.1),
+        &format!(", process deadline misses (heartbeats) {ice_misses}{blocks}"),
     );
     if !a.no_uds {
-        let u = bench_uds(a, period_ns)?;
-        u.0.print(
+        uds.print(
             "Unix-domain datagram sockets (baseline, same steps)",
-            &format!(", planner wake-ups late by > period/2: {}", u.1),
+            &format!(", planner wake-ups late by > period/2: {uds_late}{blocks}"),
         );
     }
     Ok(())
