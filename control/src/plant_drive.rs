@@ -43,8 +43,6 @@ pub struct PlantDrive {
     /// The samples handed out by the last `read`, robot frame, stamped with the time they were
     /// reported on the caller's clock.
     samples: Vec<pcr_plant::Measurement>,
-    /// The command of the cycle the plant runs.
-    last_cmd: Option<MotorCommand>,
 }
 
 /// The plant's motion-capture view, as the driver step's pose sensor.
@@ -70,7 +68,6 @@ pub fn plant_backend(
             qtm: None,
             pending: std::collections::VecDeque::new(),
             samples: Vec::new(),
-            last_cmd: None,
         },
         PlantSensor { last },
     ))
@@ -128,23 +125,13 @@ impl Driver for PlantDrive {
 
     fn write(&mut self, time_s: f64, period_s: f64, cmd: &MotorCommand) -> Result<(), DriverError> {
         let t = self.plant_time(time_s);
-        // A command earlier than the end of the last cycle (the one before came late), as the
-        // firmware treats it: an unchanged target lets the running segment finish (nothing to
-        // do: the plant has simulated it); a new target starts a new segment at once, so the
-        // plant takes back the rest of that cycle. Otherwise the plant would run a cycle ahead
-        // of the clock from then on.
-        if t + 1e-9 < self.plant.time() && self.last_cmd.as_ref() == Some(cmd) {
-            return Ok(());
-        }
-        self.last_cmd = Some(*cmd);
-        if let Some(t0) = self
-            .plant
-            .rewind_to(t)
-            .map_err(|e| DriverError::Limit(e.to_string()))?
-        {
+        let r = self.plant.write(t, period_s, cmd);
+        // An early command took back part of a cycle (the plant's firmware rule): its samples
+        // after that were made again.
+        if let Some(t0) = self.plant.take_withdrawn() {
             self.pending.retain(|m| m.t_s <= t0 + 1e-12);
         }
-        self.plant.write(t, period_s, cmd)
+        r
     }
 
     fn read(&mut self, time_s: f64, period_s: f64) -> Result<DriverState, DriverError> {

@@ -1,19 +1,19 @@
 //! The chain's hot hops (planner -> IK, IK -> driver): how a downstream stage sleeps and wakes.
 //!
-//! The IK and the driver wait on their one hop listener itself ([`wait`]), not on a WaitSet: a
-//! WaitSet wake-up costs an `epoll_wait`, an `fcntl(F_GETFD)` (iceoryx2's reactor checks the
-//! triggered descriptor) and its bookkeeping before the listener is drained, which is most of
-//! what separated an iceoryx2 hop from a Unix-socket hop (BENCHMARKS.md, "Issue 13 item 3").
-//! Their periodic work (the driver's period tick, every stage's heartbeat) arrives as events on
-//! the same listener: a [`Ticker`] thread of the process notifies its own listener with
-//! [`TICK`] and [`HEARTBEAT`] at absolute CLOCK_MONOTONIC times, so the stage still sleeps in one
-//! place, and every step still runs on the main thread.
+//! The hop events use their own iceoryx2 service type, [`HopService`], whose event is a
+//! semaphore in shared memory. Such a listener has no file descriptor and cannot join a WaitSet,
+//! so the IK and the driver wait on their one hop listener itself ([`wait`]); their periodic work
+//! (the driver's period tick, every stage's heartbeat) arrives as events on the same listener: a
+//! [`Ticker`] thread of the process notifies its own listener with [`TICK`] and [`HEARTBEAT`] at
+//! absolute CLOCK_MONOTONIC times, so the stage still sleeps in one place, and every step still
+//! runs on the main thread ([`start`] sets both up). Why: BENCHMARKS.md, "Issue 13 item 3".
 //!
-//! SIGINT/SIGTERM: [`catch_termination`] installs a handler without `SA_RESTART` (iceoryx2's own
-//! restarts the interrupted call, and a blocking `recvfrom` would then sleep on), so the signal
-//! interrupts the wait and [`wait`] reports it as [`Wake::terminate`]. The ticker thread blocks
-//! every signal, so that they reach the main thread; should one land on another thread, the
-//! ticker sees the request at its next release and wakes the main thread.
+//! SIGINT/SIGTERM: iceoryx2 installs its signal handler only when a WaitSet (or `Node::wait`)
+//! first waits, so a process without one would simply die of SIGTERM (no hold command from the
+//! driver, no statistics). [`catch_termination`] installs a handler that sets a flag, without
+//! `SA_RESTART`, so the signal interrupts the wait and [`wait`] reports it as [`Wake::terminate`].
+//! The ticker thread blocks every signal, so that they reach the main thread; should one land on
+//! another thread, the ticker sees the request at its next release and wakes the main thread.
 
 use crate::ports::ChainNode;
 use anyhow::{anyhow, Result};
@@ -34,10 +34,8 @@ use std::time::Duration;
 /// event's shared-memory segment (`SemaphoreShmCountingBitSet`) instead of a Unix datagram
 /// socket. A notification is then a `sem_post` (one `futex` wake when the listener sleeps, none
 /// otherwise), the wait a `sem_wait`, and the drain a `sem_trywait` in user space, where the
-/// socket costs a `sendto`, a `recvfrom` and a second `recvfrom` to find the socket empty.
-/// Such a listener has no file descriptor and cannot join a WaitSet, which is why the IK and
-/// the driver wait on it alone ([`wait`]). Everything else (samples, the other events) stays
-/// on `ipc::Service`.
+/// socket event costs a `sendto` and a `recvfrom` (plus `epoll_wait` and `fcntl` in a WaitSet).
+/// Everything else (samples, the other events) stays on `ipc::Service`.
 #[derive(Debug, Clone)]
 pub struct HopService {}
 
@@ -91,11 +89,12 @@ pub struct Wake {
 
 impl Wake {
     fn note(&mut self, id: EventId) {
-        match id.as_value() {
-            0 => self.sample = true,
-            1 => self.tick = true,
-            2 => self.heartbeat = true,
-            _ => {}
+        if id == SAMPLE {
+            self.sample = true;
+        } else if id == TICK {
+            self.tick = true;
+        } else if id == HEARTBEAT {
+            self.heartbeat = true;
         }
     }
 }
@@ -146,6 +145,26 @@ pub fn catch_termination() -> Result<()> {
 /// True once SIGINT or SIGTERM arrived (after [`catch_termination`]).
 pub fn termination_requested() -> bool {
     TERMINATE.load(Ordering::SeqCst)
+}
+
+/// Sets up a stage that sleeps on its hop listener of service `base`: catches SIGINT/SIGTERM
+/// ([`catch_termination`]) and starts its [`Ticker`] (the period tick if `tick` is given, the
+/// heartbeat of `c`). Call after the real-time settings (the ticker inherits them).
+pub fn start(
+    name: &str,
+    c: &crate::CommonArgs,
+    base: &'static str,
+    tick: Option<Duration>,
+) -> Result<Ticker> {
+    catch_termination()?;
+    Ticker::spawn(
+        &format!("{name}-ticker-{}", std::process::id()),
+        &c.prefix,
+        c.protocol_version,
+        base,
+        tick,
+        c.heartbeat(),
+    )
 }
 
 /// Drains the hop listener without blocking and says what was pending.

@@ -73,12 +73,9 @@ impl ChainNode {
         })
     }
 
-    /// The node of the hop events: the process's node itself while [`HopService`] is the
-    /// process's service type, otherwise a second node of the same name and configuration.
+    /// The node of the hop events: a second node of the same name and configuration, made on
+    /// first use (only the IK, the driver and the planner need it).
     fn hop_node(&self) -> Result<&Node<HopService>> {
-        if let Some(n) = (&self.node as &dyn std::any::Any).downcast_ref::<Node<HopService>>() {
-            return Ok(n);
-        }
         if let Some(n) = self.hop.get() {
             return Ok(n);
         }

@@ -90,8 +90,11 @@ pub struct Plant {
     jac_cache: Option<JacobianCache>,
     /// Sign of det(Jacobian) of the statics at home (with this plant's friction): stable.
     stable_sign: f64,
-    /// The last cycle run: its start state, period and command ([`Plant::rewind_to`]).
+    /// The last cycle run: its start state, period and command (for taking it back).
     last_cycle: Option<CycleRecord>,
+    /// Start of the earliest cycle taken back since the last [`Plant::take_withdrawn`]: its
+    /// measurements after that time were made again.
+    withdrawn: Option<f64>,
 }
 
 /// What [`Plant::rewind_to`] needs of the last cycle: the state at its start, its period and
@@ -193,6 +196,7 @@ impl Plant {
             jac_cache: None,
             stable_sign,
             last_cycle: None,
+            withdrawn: None,
             truth,
             cfg: cfg.clone(),
         };
@@ -346,15 +350,21 @@ impl Plant {
         self.jac_cache = None;
     }
 
+    /// After a `write` that came early and took back part of a cycle: the start of that cycle.
+    /// Measurements later than this that were already drained were made again (with new noise)
+    /// and must be dropped by whoever holds them. Cleared by the call.
+    pub fn take_withdrawn(&mut self) -> Option<f64> {
+        self.withdrawn.take()
+    }
+
     /// Takes back the part of the last cycle after `t` (a time inside it): the plant is put
     /// back to the cycle's start and the cycle is simulated again up to `t` only, as a firmware
     /// that receives its next command early starts the next segment from where the motors are.
     /// Without this, a command that comes early (a late one followed by one on time) would leave
     /// the plant a cycle ahead of the clock for good, its motion late against the commands.
-    /// Returns the start time of the cycle taken back (measurements after it are made again:
-    /// a caller that drained some must drop those later than this). `None` when `t` is not
-    /// inside the last cycle (nothing is changed then).
-    pub fn rewind_to(&mut self, t: f64) -> Result<Option<f64>, PlantError> {
+    /// Returns the start time of the cycle taken back (measurements after it are made again).
+    /// `None` when `t` is not inside the last cycle (nothing is changed then).
+    fn rewind_to(&mut self, t: f64) -> Result<Option<f64>, PlantError> {
         let Some(r) = self.last_cycle.take() else {
             return Ok(None);
         };
@@ -664,8 +674,20 @@ impl Driver for Plant {
         &self.name
     }
 
+    /// A command that comes before the end of the simulated cycle (the one before came late) is
+    /// treated as the firmware treats it (`driver/firmware/main.c`, `on_setpoint`): an unchanged
+    /// target lets the running segment finish, a new one starts a new segment at once (the rest
+    /// of the cycle is taken back); otherwise the plant would stay a cycle ahead of the clock.
     fn write(&mut self, time_s: f64, period_s: f64, cmd: &MotorCommand) -> Result<(), DriverError> {
-        if time_s > self.state.t_s + 1e-9 {
+        if time_s + 1e-9 < self.state.t_s {
+            if cmd.steps == self.target && cmd.enable == self.enabled {
+                return Ok(());
+            }
+            let limit = |e: PlantError| DriverError::Limit(e.to_string());
+            if let Some(t0) = self.rewind_to(time_s).map_err(limit)? {
+                self.withdrawn = Some(self.withdrawn.map_or(t0, |w| w.min(t0)));
+            }
+        } else if time_s > self.state.t_s + 1e-9 {
             self.idle_until(time_s)
                 .map_err(|e| DriverError::Limit(e.to_string()))?;
         }

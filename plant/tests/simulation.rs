@@ -377,9 +377,10 @@ fn a_setpoint_without_equilibrium_faults_and_holds() {
 #[test]
 fn an_early_command_takes_back_the_rest_of_the_cycle_and_the_plant_keeps_to_the_clock() {
     // Every tenth command comes 12 ms late and the next one on time, i.e. early against the
-    // end of the late cycle. The plant takes back the rest of the late cycle each time (as a
-    // driver does, `rewind_to` before `write`), so it never runs ahead of the clock, its
-    // measurements stay in time order, and it ends where a punctual plant ends.
+    // end of the late cycle. The plant takes back the rest of the late cycle each time (the
+    // firmware's rule for a new target), so it never runs ahead of the clock, its measurements
+    // stay in time order (those drained and made again are dropped, as `take_withdrawn` says),
+    // and it ends where a punctual plant ends.
     let mut plant = ideal_with(|_| {});
     let mut punctual = ideal_with(|_| {});
     let home = plant.home_steps();
@@ -388,11 +389,11 @@ fn an_early_command_takes_back_the_rest_of_the_cycle_and_the_plant_keeps_to_the_
     for k in 0..100 {
         let t = k as f64 * CYCLE + if k % 10 == 3 { 0.012 } else { 0.0 };
         let c = cmd(wave(home, k as f64 * CYCLE, 60.0));
-        if let Some(t0) = plant.rewind_to(t).unwrap() {
+        plant.write(t, CYCLE, &c).unwrap();
+        if let Some(t0) = plant.take_withdrawn() {
             rewinds += 1;
             meas.retain(|m| m.t_s <= t0 + 1e-12);
         }
-        plant.write(t, CYCLE, &c).unwrap();
         meas.extend(plant.drain_measurements());
         punctual.write(k as f64 * CYCLE, CYCLE, &c).unwrap();
         assert!(

@@ -21,7 +21,7 @@ use pcr_messages::{
 };
 use pcr_mocap_bridge::{QtmServer, ServerConfig};
 use pcr_nodes::cycle::{driver_on_setpoint, driver_run};
-use pcr_nodes::hop::{self, Ticker};
+use pcr_nodes::hop;
 use pcr_nodes::{ports::latest, publish, ChainNode, CommonArgs, CycleStats, ProtocolGuard};
 use pcr_plant::PlantConfig;
 use pcr_robot::RobotConfig;
@@ -286,7 +286,6 @@ fn serve<D: Driver, P: PoseSensor>(
     let mut fresh_since_tick = false;
     let mut fatal: Option<anyhow::Error> = None;
 
-    hop::catch_termination()?;
     if qtm.is_some() {
         // SIGUSR1 restarts the simulated QTM (seen at the next heartbeat).
         // SAFETY: the handler only stores to an atomic.
@@ -297,14 +296,7 @@ fn serve<D: Driver, P: PoseSensor>(
             )
         };
     }
-    let _ticker = Ticker::spawn(
-        &format!("pcr-driver-ticker-{}", std::process::id()),
-        &c.prefix,
-        c.protocol_version,
-        s::JOINT_SETPOINT,
-        Some(c.period()),
-        c.heartbeat(),
-    )?;
+    let _ticker = hop::start("pcr-driver", c, s::JOINT_SETPOINT, Some(c.period()))?;
 
     loop {
         let w = hop::wait(&listener)?;

@@ -7,7 +7,7 @@ use clap::Parser;
 use pcr_control::IkStep;
 use pcr_kinematics::Robot;
 use pcr_messages::{monotonic_ns, services as s, Heartbeat, JointSetpoint, NodeKind, TaskSetpoint};
-use pcr_nodes::hop::{self, Ticker};
+use pcr_nodes::hop;
 use pcr_nodes::{cycle::ik_on_setpoint, publish, CommonArgs, CycleStats};
 use pcr_robot::RobotConfig;
 
@@ -47,15 +47,7 @@ fn run(a: Args) -> Result<()> {
     let mut stats = CycleStats::new(kind, c.protocol_version, period_ns);
     let mut last_rx = monotonic_ns();
 
-    hop::catch_termination()?;
-    let _ticker = Ticker::spawn(
-        &format!("pcr-ik-ticker-{}", std::process::id()),
-        &c.prefix,
-        c.protocol_version,
-        s::TASK_SETPOINT,
-        None,
-        c.heartbeat(),
-    )?;
+    let _ticker = hop::start("pcr-ik", c, s::TASK_SETPOINT, None)?;
 
     loop {
         let w = hop::wait(&listener)?;
