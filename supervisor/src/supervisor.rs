@@ -717,6 +717,8 @@ impl Supervisor {
         let backend = backend.as_str();
         let created = stamp.to_string();
         let robot = self.robot_path.display().to_string();
+        // The timing contract: the driver executes a row's command over the next cycle.
+        let command_delay = pcr_recording::number(self.cfg.period_ms * 1e-3);
         // Unbuffered: every row is one write(2), flushed as it comes (a supervisor killed
         // mid-run leaves every row it recorded, none torn).
         let mut meta: Vec<(&str, &str)> = vec![
@@ -724,6 +726,7 @@ impl Supervisor {
             ("source", backend),
             ("created", created.as_str()),
             ("program", name),
+            (pcr_recording::COMMAND_DELAY_KEY, command_delay.as_str()),
         ];
         let (experiment, extra_meta) = match experiment {
             Some((x, m)) => (Some(x), m),
