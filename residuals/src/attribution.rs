@@ -29,6 +29,10 @@ pub struct Options {
     pub candidates: Vec<String>,
     /// Largest distance of the extended model's geometry from the drawing, mm or degrees.
     pub max_geometry_change: f64,
+    /// Solve every row on its own: no reuse of a row at rest's prediction, no warm-started
+    /// loaded equilibrium, load responses computed at every row instead of interpolated between
+    /// anchors. Slow; the reference the fast path is tested against.
+    pub exact: bool,
 }
 
 impl Default for Options {
@@ -39,6 +43,7 @@ impl Default for Options {
             max_rounds: 6,
             candidates: candidates::NAMES.iter().map(|s| s.to_string()).collect(),
             max_geometry_change: 3.0,
+            exact: false,
         }
     }
 }
@@ -253,7 +258,7 @@ fn accept<'a>(
             let nctx = cand
                 .validate("extended robot")
                 .ok()
-                .and_then(|_| ExtendedModel::new(&cand).ok())
+                .and_then(|_| ExtendedModel::like(&cand, &ctx.model).ok())
                 .map(|m| Context::new(series, m, blocks, w_phi))
                 .filter(|n| n.rows.len() + 5 >= ctx.rows.len());
             if let Some(nctx) = nctx {
@@ -279,9 +284,9 @@ fn accept<'a>(
     }
     let (cfg, nctx, sse) = cur?;
     // Every effect's parameters together on the full model.
-    let refined = crate::refine::refine(&cfg, series, blocks, w_phi, 3000);
+    let refined = crate::refine::refine(&cfg, &ctx.model, series, blocks, w_phi, 3000);
     if refined != cfg {
-        if let Ok(model) = ExtendedModel::new(&refined) {
+        if let Ok(model) = ExtendedModel::like(&refined, &ctx.model) {
             let rctx = Context::new(series, model, blocks, w_phi);
             if rctx.rows.len() + 5 >= ctx.rows.len() && rctx.sse(&rctx.train(), None) < sse {
                 return Some((refined, rctx));
@@ -581,7 +586,8 @@ pub fn attribute(
     opts: &Options,
 ) -> Result<Attribution, AttributionError> {
     let w_phi = start.legs.iter().map(|l| l.r_p_mm).sum::<f64>() / 3.0;
-    let model = ExtendedModel::new(start)?;
+    let mut model = ExtendedModel::new(start)?;
+    model.exact = opts.exact;
     let ctx0 = Context::new(series, model.clone(), blocks, w_phi);
     let timing = crate::alignment::align(&ctx0);
     let finding = crate::alignment::declaration_errors(&timing);

@@ -36,8 +36,36 @@ pub struct Context<'a> {
     pub unpredicted: usize,
     /// The calibration parameters' columns of every row, computed on first use.
     nuisance: std::sync::OnceLock<std::sync::Arc<NuisanceTable>>,
-    /// The five load responses of every row, computed on first use.
-    loads: std::sync::OnceLock<std::sync::Arc<Vec<[[f64; 3]; 5]>>>,
+    /// The five load responses of every row, computed on first use, and how they were
+    /// interpolated.
+    loads: std::sync::OnceLock<LoadResponses>,
+}
+
+/// The load responses of every row and how they were interpolated (`None`: every row solved).
+type LoadResponses = (std::sync::Arc<Vec<[[f64; 3]; 5]>>, Option<ResponseCheck>);
+
+/// Largest change of a segment's bending (rad) between two anchor rows of the load responses.
+pub const ANCHOR_BENDING_RAD: f64 = 0.05;
+
+/// Every this many interpolated rows, one is solved to measure the interpolation error.
+pub const CHECK_EVERY: usize = 25;
+
+/// Largest relative error of the interpolated load responses on the check sample (against the
+/// largest response of each parameter); above it, every row is solved.
+pub const MAX_RESPONSE_ERROR: f64 = 0.02;
+
+/// The interpolation of the load responses, measured.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct ResponseCheck {
+    /// Rows solved as anchors.
+    pub anchors: usize,
+    /// Interpolated rows solved to check the interpolation.
+    pub checked: usize,
+    /// Rows solved in all.
+    pub solved: usize,
+    /// Largest error of an interpolated response on the check sample, relative to the largest
+    /// response of that parameter.
+    pub max_relative_error: f64,
 }
 
 /// The nuisance parameters and their columns for every row of a context.
@@ -105,24 +133,168 @@ impl<'a> Context<'a> {
     ) -> std::sync::Arc<Vec<[[f64; 3]; 5]>> {
         self.loads
             .get_or_init(|| {
-                std::sync::Arc::new(
-                    self.rows
-                        .iter()
-                        .map(|row| {
-                            let p = self.pred(row);
-                            let Some(pose) = p.pose else {
-                                return [[0.0; 3]; 5];
-                            };
-                            let guess = pcr_kinematics::Pose::new(pose[0], pose[1], pose[2]);
-                            self.model
-                                .robot
-                                .load_response(&p.kappa, loads, &guess)
-                                .unwrap_or([[0.0; 3]; 5])
-                        })
-                        .collect(),
-                )
+                let exact = |i: usize| self.load_response_at(i, loads);
+                if self.model.exact {
+                    return (
+                        std::sync::Arc::new((0..self.rows.len()).map(exact).collect()),
+                        None,
+                    );
+                }
+                let (resp, check) = self.interpolated_load_responses(loads);
+                match check {
+                    Some(c) if c.max_relative_error <= MAX_RESPONSE_ERROR => {
+                        tracing::debug!(
+                            "load responses: {} of {} rows solved ({} anchors, {} checks), \
+                             largest relative interpolation error {:.2e}",
+                            c.solved,
+                            self.rows.len(),
+                            c.anchors,
+                            c.checked,
+                            c.max_relative_error
+                        );
+                        (std::sync::Arc::new(resp), Some(c))
+                    }
+                    _ => {
+                        tracing::debug!(
+                            "load responses: interpolation error {:?} above {MAX_RESPONSE_ERROR}, every row solved",
+                            check.map(|c| c.max_relative_error)
+                        );
+                        (
+                            std::sync::Arc::new((0..self.rows.len()).map(exact).collect()),
+                            None,
+                        )
+                    }
+                }
             })
+            .0
             .clone()
+    }
+
+    /// How the load responses of this context were interpolated (`None` before they are
+    /// computed, or when every row was solved).
+    pub fn load_response_check(&self) -> Option<ResponseCheck> {
+        self.loads.get().and_then(|l| l.1)
+    }
+
+    /// The load response of row `i`, solved.
+    fn load_response_at(&self, i: usize, loads: &pcr_kinematics::statics::Loads) -> [[f64; 3]; 5] {
+        let p = self.pred(&self.rows[i]);
+        let Some(pose) = p.pose else {
+            return [[0.0; 3]; 5];
+        };
+        let guess = pcr_kinematics::Pose::new(pose[0], pose[1], pose[2]);
+        self.model
+            .robot
+            .load_response(&p.kappa, loads, &guess)
+            .unwrap_or([[0.0; 3]; 5])
+    }
+
+    /// The load responses solved at anchor rows (the first row of every series and every row
+    /// whose segments' bending differs from the last anchor's by more than
+    /// [`ANCHOR_BENDING_RAD`]) and interpolated between consecutive anchors along the
+    /// configuration (the projection of a row's curvatures on the segment between the two
+    /// anchors'); rows with the same curvatures as an anchor take its response. The error of
+    /// the interpolation is measured on a check sample of the other rows, solved.
+    fn interpolated_load_responses(
+        &self,
+        loads: &pcr_kinematics::statics::Loads,
+    ) -> (Vec<[[f64; 3]; 5]>, Option<ResponseCheck>) {
+        let n = self.rows.len();
+        let lc: [f64; 3] = std::array::from_fn(|i| self.model.robot.legs[i].l_c);
+        let kappa = |i: usize| self.pred(&self.rows[i]).kappa;
+        let bending = |a: &[f64; 3], b: &[f64; 3]| {
+            (0..3)
+                .map(|l| ((a[l] - b[l]) * lc[l]).abs())
+                .fold(0.0, f64::max)
+        };
+        // Anchors: indices into `rows`, in order.
+        let mut anchor = vec![false; n];
+        let mut last: Option<(usize, [f64; 3])> = None;
+        for i in 0..n {
+            let k = kappa(i);
+            let new_series = last.is_none_or(|(j, _)| self.rows[j].s != self.rows[i].s);
+            if new_series || last.is_some_and(|(_, a)| bending(&a, &k) > ANCHOR_BENDING_RAD) {
+                // The row before a jump is an anchor too: interpolation stays on one side.
+                if i > 0 && !new_series && bending(&kappa(i - 1), &k) > ANCHOR_BENDING_RAD {
+                    anchor[i - 1] = true;
+                }
+                anchor[i] = true;
+                last = Some((i, k));
+            }
+        }
+        if n > 0 {
+            anchor[n - 1] = true;
+        }
+        let mut out = vec![[[0.0; 3]; 5]; n];
+        let mut solved = 0usize;
+        let mut anchors = 0usize;
+        for i in (0..n).filter(|&i| anchor[i]) {
+            out[i] = self.load_response_at(i, loads);
+            solved += 1;
+            anchors += 1;
+        }
+        // Between anchors a < b of one series.
+        let idx: Vec<usize> = (0..n).filter(|&i| anchor[i]).collect();
+        for w in idx.windows(2) {
+            let (a, b) = (w[0], w[1]);
+            if self.rows[a].s != self.rows[b].s {
+                continue;
+            }
+            let (ka, kb) = (kappa(a), kappa(b));
+            let d: [f64; 3] = std::array::from_fn(|l| (kb[l] - ka[l]) * lc[l]);
+            let dd: f64 = d.iter().map(|v| v * v).sum();
+            for i in a + 1..b {
+                let k = kappa(i);
+                let t = if dd > 0.0 {
+                    ((0..3).map(|l| (k[l] - ka[l]) * lc[l] * d[l]).sum::<f64>() / dd)
+                        .clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
+                let (ra, rb) = (&out[a], &out[b]);
+                out[i] = std::array::from_fn(|j| {
+                    std::array::from_fn(|c| ra[j][c] + t * (rb[j][c] - ra[j][c]))
+                });
+            }
+        }
+        // The check sample: every CHECK_EVERY-th interpolated row with a prediction, solved.
+        let mut worst = 0.0f64;
+        let mut checked = 0usize;
+        let mut scale = [0.0f64; 5];
+        let mut errs: Vec<[f64; 5]> = Vec::new();
+        for i in (0..n)
+            .filter(|&i| !anchor[i] && self.pred(&self.rows[i]).pose.is_some())
+            .step_by(CHECK_EVERY)
+        {
+            let e = self.load_response_at(i, loads);
+            solved += 1;
+            checked += 1;
+            let mut err = [0.0; 5];
+            for j in 0..5 {
+                let norm = e[j].iter().map(|v| v * v).sum::<f64>().sqrt();
+                scale[j] = scale[j].max(norm);
+                err[j] = (0..3)
+                    .map(|c| (out[i][j][c] - e[j][c]).powi(2))
+                    .sum::<f64>()
+                    .sqrt();
+            }
+            errs.push(err);
+            out[i] = e;
+        }
+        for err in &errs {
+            for j in 0..5 {
+                if scale[j] > 0.0 {
+                    worst = worst.max(err[j] / scale[j]);
+                }
+            }
+        }
+        let check = (checked > 0 || anchors == n).then_some(ResponseCheck {
+            anchors,
+            checked,
+            solved,
+            max_relative_error: worst,
+        });
+        (out, check)
     }
 
     /// The prediction of a row.

@@ -49,6 +49,9 @@ pub struct ExtendedModel {
     pub robot: Robot,
     /// Loads of the compliance effect.
     pub loads: Option<Loads>,
+    /// Every row solved on its own (no reuse of the previous row's configuration or
+    /// equilibrium): the reference the fast path is tested against.
+    pub exact: bool,
 }
 
 /// Why a model cannot be built.
@@ -68,7 +71,15 @@ impl ExtendedModel {
                 .map(Loads::from_compliance),
             robot,
             config: config.clone(),
+            exact: false,
         })
+    }
+
+    /// The model of a robot file, solved as `like` is (exact or fast).
+    pub fn like(config: &RobotConfig, like: &ExtendedModel) -> Result<ExtendedModel, ModelError> {
+        let mut m = ExtendedModel::new(config)?;
+        m.exact = like.exact;
+        Ok(m)
     }
 
     /// The effects.
@@ -98,7 +109,8 @@ impl ExtendedModel {
         if let Some(d) = &e.drift {
             apply_drift(s, &mut dl_eff, d);
         }
-        let mut out = Vec::with_capacity(s.samples.len());
+        let mut out: Vec<Prediction> = Vec::with_capacity(s.samples.len());
+        let mut warm = pcr_kinematics::statics::LoadedWarm::default();
         let mut guess = s
             .samples
             .iter()
@@ -122,8 +134,27 @@ impl ExtendedModel {
                 });
                 continue;
             }
+            // A row whose configuration is the previous one's (at rest) has its prediction.
+            if !self.exact {
+                if let Some(prev) = out.last().filter(|p: &&Prediction| {
+                    p.pose.is_some() && p.kappa == kappa && p.dl_eff == dl_eff[k]
+                }) {
+                    let mut same = *prev;
+                    same.q_eff = q_eff[k];
+                    out.push(same);
+                    continue;
+                }
+            }
             let pose = match &self.loads {
-                Some(l) => self.robot.fk_loaded(&kappa, l, &guess).ok().map(|e| e.pose),
+                Some(l) if self.exact => {
+                    self.robot.fk_loaded(&kappa, l, &guess).ok().map(|e| e.pose)
+                }
+                Some(l) => self
+                    .robot
+                    .fk_loaded_warm(&kappa, l, &guess, &mut warm)
+                    .or_else(|_| self.robot.fk_loaded(&kappa, l, &guess))
+                    .ok()
+                    .map(|e| e.pose),
                 None => self.robot.fk_warm(&kappa, &guess).ok(),
             };
             let (j_q, j_kappa) =

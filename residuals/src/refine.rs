@@ -197,6 +197,7 @@ fn slots(e: &Effects) -> Vec<Slot> {
 
 struct Refit<'a> {
     base: &'a RobotConfig,
+    like: &'a ExtendedModel,
     slots: Vec<Slot>,
     series: &'a [Series],
     rows: Vec<Vec<usize>>,
@@ -220,7 +221,7 @@ impl Problem for Refit<'_> {
     }
 
     fn residuals(&mut self, x: &[f64], r: &mut [f64]) -> Result<(), String> {
-        let model = ExtendedModel::new(&self.config(x)).map_err(|e| e.0)?;
+        let model = ExtendedModel::like(&self.config(x), self.like).map_err(|e| e.0)?;
         let mut k = 0;
         for (s, rows) in self.series.iter().zip(&self.rows) {
             let want: std::collections::HashSet<usize> = rows.iter().copied().collect();
@@ -246,9 +247,10 @@ impl Problem for Refit<'_> {
 
 /// Refines the continuous parameters of every effect of `config` on (at most `max_rows` of)
 /// the training rows; returns the refined configuration (or the input when there is nothing to
-/// refine or the solver fails).
+/// refine or the solver fails). The models are solved as `like` is (exact or fast).
 pub fn refine(
     config: &RobotConfig,
+    like: &ExtendedModel,
     series: &[Series],
     blocks: &Blocks,
     w_phi: f64,
@@ -300,6 +302,7 @@ pub fn refine(
         .collect();
     let mut p = Refit {
         base: config,
+        like,
         slots,
         series,
         rows,
