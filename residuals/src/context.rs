@@ -47,6 +47,10 @@ type LoadResponses = (std::sync::Arc<Vec<[[f64; 3]; 5]>>, Option<ResponseCheck>)
 /// Largest change of a segment's bending (rad) between two anchor rows of the load responses.
 pub const ANCHOR_BENDING_RAD: f64 = 0.05;
 
+/// Largest distance (a segment's bending, rad) of a row's configuration from the chord between
+/// the anchors it is interpolated between.
+pub const ANCHOR_DEVIATION_RAD: f64 = 0.002;
+
 /// Every this many interpolated rows, one is solved to measure the interpolation error.
 pub const CHECK_EVERY: usize = 25;
 
@@ -207,29 +211,72 @@ impl<'a> Context<'a> {
                 .map(|l| ((a[l] - b[l]) * lc[l]).abs())
                 .fold(0.0, f64::max)
         };
-        // Anchors: indices into `rows`, in order.
+        // Anchors: the first and last row of every series, then, between consecutive anchors,
+        // the row farthest (in bending) from where the interpolation would put it, until every
+        // row is within ANCHOR_DEVIATION_RAD of the chord between its anchors and no chord is
+        // longer than ANCHOR_BENDING_RAD (the path of the configuration simplified to a
+        // polyline, Douglas-Peucker).
         let mut anchor = vec![false; n];
-        let mut last: Option<(usize, [f64; 3])> = None;
+        let mut stack: Vec<(usize, usize)> = Vec::new();
+        let mut first = 0usize;
         for i in 0..n {
-            let k = kappa(i);
-            let new_series = last.is_none_or(|(j, _)| self.rows[j].s != self.rows[i].s);
-            if new_series || last.is_some_and(|(_, a)| bending(&a, &k) > ANCHOR_BENDING_RAD) {
-                // The row before a jump is an anchor too: interpolation stays on one side.
-                if i > 0 && !new_series && bending(&kappa(i - 1), &k) > ANCHOR_BENDING_RAD {
-                    anchor[i - 1] = true;
-                }
+            if i + 1 == n || self.rows[i + 1].s != self.rows[i].s {
+                anchor[first] = true;
                 anchor[i] = true;
-                last = Some((i, k));
+                if i > first + 1 {
+                    stack.push((first, i));
+                }
+                first = i + 1;
             }
         }
-        if n > 0 {
-            anchor[n - 1] = true;
+        let chord_t = |a: usize, b: usize, i: usize| {
+            let (ka, kb, k) = (kappa(a), kappa(b), kappa(i));
+            let d: [f64; 3] = std::array::from_fn(|l| (kb[l] - ka[l]) * lc[l]);
+            let dd: f64 = d.iter().map(|v| v * v).sum();
+            let t = if dd > 0.0 {
+                ((0..3).map(|l| (k[l] - ka[l]) * lc[l] * d[l]).sum::<f64>() / dd).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let dev = (0..3)
+                .map(|l| ((k[l] - ka[l] - t * (kb[l] - ka[l])) * lc[l]).abs())
+                .fold(0.0, f64::max);
+            (t, dev)
+        };
+        while let Some((a, b)) = stack.pop() {
+            let mut worst = (0.0f64, a);
+            for i in a + 1..b {
+                let (_, dev) = chord_t(a, b, i);
+                if dev > worst.0 {
+                    worst = (dev, i);
+                }
+            }
+            let split = if worst.0 > ANCHOR_DEVIATION_RAD {
+                Some(worst.1)
+            } else if bending(&kappa(a), &kappa(b)) > ANCHOR_BENDING_RAD {
+                Some((a + b) / 2)
+            } else {
+                None
+            };
+            if let Some(m) = split.filter(|&m| m > a && m < b) {
+                anchor[m] = true;
+                if m > a + 1 {
+                    stack.push((a, m));
+                }
+                if b > m + 1 {
+                    stack.push((m, b));
+                }
+            }
         }
         let mut out = vec![[[0.0; 3]; 5]; n];
         let mut solved = 0usize;
         let mut anchors = 0usize;
+        let mut scale = [0.0f64; 5];
         for i in (0..n).filter(|&i| anchor[i]) {
             out[i] = self.load_response_at(i, loads);
+            for (sc, r) in scale.iter_mut().zip(&out[i]) {
+                *sc = sc.max(r.iter().map(|v| v * v).sum::<f64>().sqrt());
+            }
             solved += 1;
             anchors += 1;
         }
@@ -240,17 +287,8 @@ impl<'a> Context<'a> {
             if self.rows[a].s != self.rows[b].s {
                 continue;
             }
-            let (ka, kb) = (kappa(a), kappa(b));
-            let d: [f64; 3] = std::array::from_fn(|l| (kb[l] - ka[l]) * lc[l]);
-            let dd: f64 = d.iter().map(|v| v * v).sum();
             for i in a + 1..b {
-                let k = kappa(i);
-                let t = if dd > 0.0 {
-                    ((0..3).map(|l| (k[l] - ka[l]) * lc[l] * d[l]).sum::<f64>() / dd)
-                        .clamp(0.0, 1.0)
-                } else {
-                    0.0
-                };
+                let (t, _) = chord_t(a, b, i);
                 let (ra, rb) = (&out[a], &out[b]);
                 out[i] = std::array::from_fn(|j| {
                     std::array::from_fn(|c| ra[j][c] + t * (rb[j][c] - ra[j][c]))
@@ -260,7 +298,6 @@ impl<'a> Context<'a> {
         // The check sample: every CHECK_EVERY-th interpolated row with a prediction, solved.
         let mut worst = 0.0f64;
         let mut checked = 0usize;
-        let mut scale = [0.0f64; 5];
         let mut errs: Vec<[f64; 5]> = Vec::new();
         for i in (0..n)
             .filter(|&i| !anchor[i] && self.pred(&self.rows[i]).pose.is_some())
