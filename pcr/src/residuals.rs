@@ -6,6 +6,7 @@
 use crate::calibrate::load_robot;
 use crate::clock::utc_now;
 use anyhow::{bail, Context as _};
+use indicatif::{ProgressBar, ProgressStyle};
 use pcr_calibration::calibrate::{self, Options as CalOptions};
 use pcr_calibration::StaticData;
 use pcr_recording::Recording;
@@ -29,6 +30,10 @@ pub struct Args {
     /// Take the robot file as it is (no calibration first).
     #[arg(long)]
     no_calibrate: bool,
+    /// Solve every row on its own (no reuse of rows at rest, no warm starts, no interpolated
+    /// load responses): slower, the reference the default path is tested against.
+    #[arg(long)]
+    exact: bool,
     /// Length of the held-out time blocks, s.
     #[arg(long, default_value_t = 4.0)]
     block_s: f64,
@@ -147,6 +152,8 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         } else {
             a.candidates.clone()
         },
+        exact: a.exact,
+        progress: progress_bar(),
         ..Options::default()
     };
     if let Some(dir) = &a.report {
@@ -158,7 +165,11 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         pcr_residuals::attribution::residual_table(&robot, &series, &blocks, &mut f)?;
     }
     let wall = std::time::Instant::now();
-    let res = attribute(&robot, &drawing, &series, &blocks, &opts)?;
+    let res = attribute(&robot, &drawing, &series, &blocks, &opts);
+    if let Some(p) = &opts.progress.0 {
+        p.stage(0, "done", 0, 0);
+    }
+    let res = res?;
     eprintln!("analysed in {:.2} s", wall.elapsed().as_secs_f64());
     for t in &res.timing {
         println!("timing: {}", t.message);
@@ -228,4 +239,44 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         println!("report: {}", p.display());
     }
     Ok(())
+}
+
+/// The analysis's progress on stderr (candidate, round, rows), when stderr is a terminal.
+struct Bar(ProgressBar);
+
+impl pcr_residuals::Progress for Bar {
+    fn stage(&self, round: usize, what: &str, rows: usize, steps: usize) {
+        if what == "done" {
+            self.0.finish_and_clear();
+            return;
+        }
+        self.0.set_length(steps as u64);
+        self.0.set_position(0);
+        let round = if round == 0 {
+            String::new()
+        } else {
+            format!("round {round}: ")
+        };
+        self.0.set_message(format!("{round}{what}, {rows} rows"));
+    }
+
+    fn step(&self) {
+        self.0.inc(1);
+    }
+}
+
+/// A progress bar for the attribution, or none when stderr is not a terminal.
+fn progress_bar() -> pcr_residuals::ProgressSink {
+    use std::io::IsTerminal;
+    if !std::io::stderr().is_terminal() {
+        return pcr_residuals::ProgressSink::default();
+    }
+    let pb = ProgressBar::new(0);
+    pb.set_style(
+        ProgressStyle::with_template("{spinner} {msg} [{bar:20}] {pos}/{len} ({elapsed})")
+            .expect("valid template")
+            .progress_chars("=> "),
+    );
+    pb.enable_steady_tick(std::time::Duration::from_millis(100));
+    pcr_residuals::ProgressSink::new(std::sync::Arc::new(Bar(pb)))
 }

@@ -13,6 +13,7 @@ use crate::features::{self, FeatureLink, Features};
 use crate::model::ExtendedModel;
 use crate::series::{Blocks, Series};
 use pcr_robot::RobotConfig;
+use rayon::prelude::*;
 use serde::Serialize;
 use statrs::distribution::{ContinuousCDF, StudentsT};
 
@@ -33,6 +34,9 @@ pub struct Options {
     /// loaded equilibrium, load responses computed at every row instead of interpolated between
     /// anchors. Slow; the reference the fast path is tested against.
     pub exact: bool,
+    /// Where progress is reported (nowhere by default).
+    #[serde(skip)]
+    pub progress: crate::progress::ProgressSink,
 }
 
 impl Default for Options {
@@ -44,6 +48,7 @@ impl Default for Options {
             candidates: candidates::NAMES.iter().map(|s| s.to_string()).collect(),
             max_geometry_change: 3.0,
             exact: false,
+            progress: Default::default(),
         }
     }
 }
@@ -236,6 +241,7 @@ fn accept<'a>(
     series: &'a [Series],
     blocks: &Blocks,
     w_phi: f64,
+    progress: &crate::progress::ProgressSink,
 ) -> Option<(RobotConfig, Context<'a>)> {
     let name = first.name;
     let start_sse = ctx.sse(&ctx.train(), None);
@@ -272,6 +278,7 @@ fn accept<'a>(
             frac *= 0.5;
         }
         trust = (2.0 * frac).min(1.0);
+        progress.step();
         if !improved || !candidates::iterable(name) || it + 1 == GN_STEPS {
             break;
         }
@@ -588,7 +595,12 @@ pub fn attribute(
     let w_phi = start.legs.iter().map(|l| l.r_p_mm).sum::<f64>() / 3.0;
     let mut model = ExtendedModel::new(start)?;
     model.exact = opts.exact;
+    let rows: usize = series.iter().map(|s| s.samples.len()).sum();
+    opts.progress
+        .stage(0, "predicting the starting model", rows, 0);
     let ctx0 = Context::new(series, model.clone(), blocks, w_phi);
+    opts.progress
+        .stage(0, "estimating the command delay", ctx0.rows.len(), 0);
     let timing = crate::alignment::align(&ctx0);
     let finding = crate::alignment::declaration_errors(&timing);
     let mut a = match crate::alignment::realigned(series, &timing) {
@@ -659,13 +671,26 @@ fn attribute_from<'a>(
             .as_ref()
             .map(|d| (ctx.sse(&test, None) - ctx.sse(&test, Some(d))) / test.len().max(1) as f64);
         let mut fits: Vec<(Fitted, Score)> = Vec::new();
+        // Every candidate fitted (in parallel; each fit is deterministic).
+        opts.progress
+            .stage(round, "fitting candidates", ctx.rows.len(), names.len());
+        let fitted_all: Vec<Option<Fitted>> = names
+            .par_iter()
+            .map(|name| {
+                let f = (name.as_str() != "geometry")
+                    .then(|| candidates::fit(name, &ctx, &train))
+                    .flatten();
+                opts.progress.step();
+                f
+            })
+            .collect();
         // `geometry` is scored first: the parsimony rule of the effects needs its verdict.
         let mut geo_significant = false;
-        for name in &names {
+        for (name, pre) in names.iter().zip(fitted_all) {
             let fitted = if name.as_str() == "geometry" {
                 geo.take()
             } else {
-                candidates::fit(name, &ctx, &train)
+                pre
             };
             let Some(f) = fitted else {
                 continue;
@@ -724,7 +749,15 @@ fn attribute_from<'a>(
         for (f, s) in fits.into_iter().filter(|(_, s)| s.significant) {
             let name = f.name;
             let points = effect_points(&ctx, &f.delta, &test);
-            let Some((next, nctx)) = accept(&config, &ctx, f, series, blocks, w_phi) else {
+            opts.progress.stage(
+                round,
+                &format!("adding {name} to the model"),
+                ctx.rows.len(),
+                GN_STEPS + 1,
+            );
+            let Some((next, nctx)) =
+                accept(&config, &ctx, f, series, blocks, w_phi, &opts.progress)
+            else {
                 mark(
                     &mut scores,
                     round,
@@ -775,6 +808,8 @@ fn attribute_from<'a>(
         }
     }
     let (train, test) = (ctx.train(), ctx.test());
+    opts.progress
+        .stage(added.len() + 1, "what remains", ctx.rows.len(), 0);
     let after = Errors::of(&ctx, &test);
     // The values the final model holds (joint refinements move earlier effects too).
     for a in &mut added {

@@ -3,6 +3,7 @@
 
 use crate::model::{ExtendedModel, Prediction};
 use crate::series::{Blocks, Series};
+use rayon::prelude::*;
 
 /// One measured row with its residual.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -140,7 +141,7 @@ impl<'a> Context<'a> {
                 let exact = |i: usize| self.load_response_at(i, loads);
                 if self.model.exact {
                     return (
-                        std::sync::Arc::new((0..self.rows.len()).map(exact).collect()),
+                        std::sync::Arc::new((0..self.rows.len()).into_par_iter().map(exact).collect()),
                         None,
                     );
                 }
@@ -164,7 +165,9 @@ impl<'a> Context<'a> {
                             check.map(|c| c.max_relative_error)
                         );
                         (
-                            std::sync::Arc::new((0..self.rows.len()).map(exact).collect()),
+                            std::sync::Arc::new(
+                                (0..self.rows.len()).into_par_iter().map(exact).collect(),
+                            ),
                             None,
                         )
                     }
@@ -272,8 +275,13 @@ impl<'a> Context<'a> {
         let mut solved = 0usize;
         let mut anchors = 0usize;
         let mut scale = [0.0f64; 5];
-        for i in (0..n).filter(|&i| anchor[i]) {
-            out[i] = self.load_response_at(i, loads);
+        let idx: Vec<usize> = (0..n).filter(|&i| anchor[i]).collect();
+        let solved_at: Vec<[[f64; 3]; 5]> = idx
+            .par_iter()
+            .map(|&i| self.load_response_at(i, loads))
+            .collect();
+        for (&i, r) in idx.iter().zip(solved_at) {
+            out[i] = r;
             for (sc, r) in scale.iter_mut().zip(&out[i]) {
                 *sc = sc.max(r.iter().map(|v| v * v).sum::<f64>().sqrt());
             }
@@ -281,7 +289,6 @@ impl<'a> Context<'a> {
             anchors += 1;
         }
         // Between anchors a < b of one series.
-        let idx: Vec<usize> = (0..n).filter(|&i| anchor[i]).collect();
         for w in idx.windows(2) {
             let (a, b) = (w[0], w[1]);
             if self.rows[a].s != self.rows[b].s {
@@ -299,11 +306,15 @@ impl<'a> Context<'a> {
         let mut worst = 0.0f64;
         let mut checked = 0usize;
         let mut errs: Vec<[f64; 5]> = Vec::new();
-        for i in (0..n)
+        let sample: Vec<usize> = (0..n)
             .filter(|&i| !anchor[i] && self.pred(&self.rows[i]).pose.is_some())
             .step_by(CHECK_EVERY)
-        {
-            let e = self.load_response_at(i, loads);
+            .collect();
+        let exact: Vec<[[f64; 3]; 5]> = sample
+            .par_iter()
+            .map(|&i| self.load_response_at(i, loads))
+            .collect();
+        for (&i, e) in sample.iter().zip(exact) {
             solved += 1;
             checked += 1;
             let mut err = [0.0; 5];

@@ -13,9 +13,11 @@ pub mod context;
 pub mod features;
 pub mod linear;
 pub mod model;
+pub mod progress;
 pub mod refine;
 pub mod report;
 pub mod series;
 
 pub use attribution::{attribute, Attribution, Options, Verdict};
+pub use progress::{Progress, ProgressSink};
 pub use series::{Blocks, Series};

@@ -6,6 +6,7 @@ use crate::context::Context;
 use nalgebra::{DMatrix, DVector};
 use pcr_kinematics::{Leg, TendonMap};
 use pcr_robot::{geometry as g, Vec2};
+use rayon::prelude::*;
 
 /// Design columns of one row: `cols[j]` is d(predicted, weighted pose)/d(param j).
 pub type Columns = Vec<[f64; 3]>;
@@ -267,6 +268,7 @@ impl Nuisance {
     /// The columns of every row of a context, computed once.
     pub fn table(&self, ctx: &Context) -> Vec<Columns> {
         (0..ctx.rows.len())
+            .into_par_iter()
             .map(|i| {
                 let mut c = vec![[0.0; 3]; self.n];
                 self.columns(ctx, i, &mut c, 0);

@@ -22,6 +22,10 @@ use pcr_kinematics::statics::Loads;
 use pcr_kinematics::{Pose, Robot};
 use pcr_robot::effects::{Backlash, Creep, Drift, Effects, Latency, Periodic};
 use pcr_robot::RobotConfig;
+use rayon::prelude::*;
+
+/// Rows of a series solved in one pass (warm-started from row to row) by one thread.
+pub const PREDICT_CHUNK: usize = 2048;
 
 /// The prediction for one row.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -94,7 +98,15 @@ impl ExtendedModel {
 
     /// Predictions for every row of a series; the pose (forward kinematics) only where `want`
     /// says so (the histories of latency, backlash and creep always run over every row).
-    pub fn predict_where(&self, s: &Series, want: &dyn Fn(usize) -> bool) -> Vec<Prediction> {
+    ///
+    /// The rows are solved in chunks of [`PREDICT_CHUNK`] in parallel, each started from the
+    /// last measured pose at or before its first row: the result does not depend on the number
+    /// of threads. An exact model ([`ExtendedModel::exact`]) solves the series in one pass.
+    pub fn predict_where(
+        &self,
+        s: &Series,
+        want: &(dyn Fn(usize) -> bool + Sync),
+    ) -> Vec<Prediction> {
         let e = &self.config.effects;
         let q_eff = effective_steps(s, e.latency.as_ref(), &e.periodic, e.backlash.as_ref());
         let mmps: [f64; 3] = std::array::from_fn(|i| self.config.legs[i].actuation.mm_per_step());
@@ -109,14 +121,38 @@ impl ExtendedModel {
         if let Some(d) = &e.drift {
             apply_drift(s, &mut dl_eff, d);
         }
-        let mut out: Vec<Prediction> = Vec::with_capacity(s.samples.len());
+        let n = s.samples.len();
+        let chunk = if self.exact { n.max(1) } else { PREDICT_CHUNK };
+        let starts: Vec<usize> = (0..n).step_by(chunk).collect();
+        let parts: Vec<Vec<Prediction>> = starts
+            .par_iter()
+            .map(|&k0| self.predict_range(s, k0..(k0 + chunk).min(n), &q_eff, &dl_eff, &mmps, want))
+            .collect();
+        parts.concat()
+    }
+
+    /// Predictions for the rows `range` of a series from their effective motor positions and
+    /// tendon displacements.
+    fn predict_range(
+        &self,
+        s: &Series,
+        range: std::ops::Range<usize>,
+        q_eff: &[[f64; 3]],
+        dl_eff: &[[f64; 3]],
+        mmps: &[f64; 3],
+        want: &(dyn Fn(usize) -> bool + Sync),
+    ) -> Vec<Prediction> {
+        let mut out: Vec<Prediction> = Vec::with_capacity(range.len());
         let mut warm = pcr_kinematics::statics::LoadedWarm::default();
-        let mut guess = s
-            .samples
+        // Started at the last measured pose at or before the range (the first of the series).
+        let mut guess = s.samples[..=range.start.min(s.samples.len().saturating_sub(1))]
             .iter()
+            .rev()
             .find_map(|x| x.pose)
+            .or_else(|| s.samples.iter().find_map(|x| x.pose))
             .map_or(Pose::default(), |p| Pose::new(p[0], p[1], p[2]));
-        for (k, smp) in s.samples.iter().enumerate() {
+        for k in range {
+            let smp = &s.samples[k];
             let kappa: [f64; 3] =
                 std::array::from_fn(|i| self.robot.legs[i].map.kappa(dl_eff[k][i]));
             // Warm start at the measured pose where there is one (robust across jumps).
