@@ -417,18 +417,47 @@ pub fn backlash(ctx: &Context, train: &[usize]) -> Option<Fitted> {
     let grid: Vec<f64> = (0..=40).map(|k| 0.5 * k as f64).collect();
     let mut b = [0.0; 3];
     let mut stds = [None; 3];
+    // The play acts on each motor alone: a profile over motor m's play runs the play operator
+    // on that motor only, the others' outputs held at the current plays.
+    let mut cur: Vec<Vec<[f64; 3]>> = pre
+        .iter()
+        .map(|q| {
+            let mut q = q.clone();
+            crate::model::apply_backlash(&mut q, &Backlash { steps: b });
+            q
+        })
+        .collect();
+    let mut col: Vec<Vec<f64>> = pre.iter().map(|q| vec![0.0; q.len()]).collect();
     for _sweep in 0..2 {
         for m in 0..3 {
             let (x, s, curv) = minimise_1d(
                 &mut |v| {
-                    let mut bb = b;
-                    bb[m] = v.max(0.0);
-                    sse_at(ctx, &rows, &delta_of(bb, Some(&rows)))
+                    for (c, q) in col.iter_mut().zip(&pre) {
+                        play_on(q, m, v.max(0.0), c);
+                    }
+                    let d: Vec<[f64; 3]> = rows
+                        .iter()
+                        .map(|&i| {
+                            let row = &ctx.rows[i];
+                            let q = ctx.pred(row).q_eff;
+                            let mut o = cur[row.s][row.k];
+                            o[m] = col[row.s][row.k];
+                            motor_delta(ctx, i, [o[0] - q[0], o[1] - q[1], o[2] - q[2]])
+                        })
+                        .collect();
+                    sse_at(ctx, &rows, &d)
                 },
                 &grid,
             );
             b[m] = x.max(0.0);
             stds[m] = profile_std(s, 3 * rows.len(), curv);
+            for (c, q) in cur.iter_mut().zip(&pre) {
+                let mut out = vec![0.0; q.len()];
+                play_on(q, m, b[m], &mut out);
+                for (v, o) in c.iter_mut().zip(out) {
+                    v[m] = o;
+                }
+            }
         }
     }
     let nui = ctx.nuisance().nui.clone();
@@ -449,6 +478,23 @@ pub fn backlash(ctx: &Context, train: &[usize]) -> Option<Fitted> {
             nuis(c);
         }),
     })
+}
+
+/// The output of motor `m` through a play of `b` steps (as [`crate::model::apply_backlash`]
+/// computes it), written to `out`.
+fn play_on(q: &[[f64; 3]], m: usize, b: f64, out: &mut [f64]) {
+    if b == 0.0 {
+        for (o, v) in out.iter_mut().zip(q) {
+            *o = v[m];
+        }
+        return;
+    }
+    let h = 0.5 * b;
+    let mut y = q.first().map_or(0.0, |v| v[m]);
+    for (o, v) in out.iter_mut().zip(q) {
+        y = y.clamp(v[m] - h, v[m] + h);
+        *o = y;
+    }
 }
 
 /// `creep`: the tendon lengthens toward gain_i dl_i with time constant T.
