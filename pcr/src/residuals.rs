@@ -250,6 +250,16 @@ impl pcr_residuals::Progress for Bar {
             self.0.finish_and_clear();
             return;
         }
+        let template = if steps == 0 {
+            "{spinner} {msg} ({elapsed})"
+        } else {
+            "{spinner} {msg} [{bar:20}] {pos}/{len} ({elapsed})"
+        };
+        self.0.set_style(
+            ProgressStyle::with_template(template)
+                .expect("valid template")
+                .progress_chars("=> "),
+        );
         self.0.set_length(steps as u64);
         self.0.set_position(0);
         let round = if round == 0 {
@@ -272,11 +282,6 @@ fn progress_bar() -> pcr_residuals::ProgressSink {
         return pcr_residuals::ProgressSink::default();
     }
     let pb = ProgressBar::new(0);
-    pb.set_style(
-        ProgressStyle::with_template("{spinner} {msg} [{bar:20}] {pos}/{len} ({elapsed})")
-            .expect("valid template")
-            .progress_chars("=> "),
-    );
     pb.enable_steady_tick(std::time::Duration::from_millis(100));
     pcr_residuals::ProgressSink::new(std::sync::Arc::new(Bar(pb)))
 }

@@ -808,8 +808,7 @@ fn attribute_from<'a>(
         }
     }
     let (train, test) = (ctx.train(), ctx.test());
-    opts.progress
-        .stage(added.len() + 1, "what remains", ctx.rows.len(), 0);
+    opts.progress.stage(0, "what remains", ctx.rows.len(), 0);
     let after = Errors::of(&ctx, &test);
     // The values the final model holds (joint refinements move earlier effects too).
     for a in &mut added {
