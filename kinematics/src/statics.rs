@@ -92,9 +92,11 @@ struct LoadedSetup {
 type M12 = SMatrix<f64, 12, 12>;
 
 /// The state [`Robot::fk_loaded_warm`] carries from one call to the next along a series: the
-/// last solution and the factorised Jacobian of the chord iteration.
+/// last solution and the factorised Jacobian of the chord iteration, and the springs' rest
+/// angles. One `LoadedWarm` serves one robot.
 #[derive(Debug, Clone, Default)]
 pub struct LoadedWarm {
+    rest: Option<[(f64, f64); 3]>,
     z: Option<V12>,
     rigid: [f64; 3],
     lu: Option<nalgebra::LU<f64, nalgebra::Const<12>, nalgebra::Const<12>>>,
@@ -231,7 +233,8 @@ impl Robot {
         guess: &Pose,
         warm: &mut LoadedWarm,
     ) -> Result<Equilibrium, FkError> {
-        let setup = self.loaded_setup(kappa, loads.ei);
+        let rest = *warm.rest.get_or_insert_with(|| self.home_joint_angles());
+        let setup = self.loaded_setup_at_rest(kappa, loads.ei, rest);
         let rigid = self.fk_warm(kappa, guess)?;
         let mut z = V12::zeros();
         z[0] = rigid.x;
@@ -311,11 +314,22 @@ impl Robot {
     }
 
     fn loaded_setup(&self, kappa: &[f64; 3], ei: f64) -> LoadedSetup {
+        self.loaded_setup_at_rest(kappa, ei, self.home_joint_angles())
+    }
+
+    /// [`Robot::loaded_setup`] with the springs' rest angles given (they depend on the robot
+    /// only).
+    fn loaded_setup_at_rest(
+        &self,
+        kappa: &[f64; 3],
+        ei: f64,
+        rest: [(f64, f64); 3],
+    ) -> LoadedSetup {
         LoadedSetup {
             m0: std::array::from_fn(|i| self.joint_m(i, kappa[i])),
             t: std::array::from_fn(|i| self.legs[i].tangent(kappa[i])),
             c: std::array::from_fn(|i| self.tip_compliance(i, kappa[i], ei)),
-            rest: self.home_joint_angles(),
+            rest,
         }
     }
 
@@ -536,6 +550,46 @@ mod tests {
         let eq0 = r.fk_loaded(&rigid, &unloaded(), &target).unwrap();
         assert!(eq0.pose.position_distance(&target) < 1e-9);
         assert_eq!(eq0.lambda, [0.0; 3]);
+    }
+
+    #[test]
+    fn warm_started_loaded_fk_finds_the_cold_equilibrium_along_a_path() {
+        let r = Robot::nominal();
+        let loads = Loads {
+            force: [0.4, -0.3],
+            k_m: 300.0,
+            k_p: 200.0,
+            ..unloaded()
+        };
+        let mut warm = LoadedWarm::default();
+        for k in 0..=60 {
+            // Along a line, back at the end (a reversal), then a jump across the workspace.
+            let s = if k <= 40 {
+                k as f64 / 40.0
+            } else {
+                (60 - k) as f64 / 20.0
+            };
+            let target = if k == 60 {
+                Pose::from_mm_deg(-30.0, -20.0, 8.0)
+            } else {
+                Pose::from_mm_deg(-25.0 + 50.0 * s, 30.0 - 40.0 * s, -5.0 + 10.0 * s)
+            };
+            let kappa = r.ik(&target).unwrap().kappa;
+            let cold = r.fk_loaded(&kappa, &loads, &target).unwrap();
+            let hot = r
+                .fk_loaded_warm(&kappa, &loads, &target, &mut warm)
+                .unwrap();
+            assert!(
+                hot.pose.position_distance(&cold.pose) < 1e-8
+                    && (hot.pose.phi - cold.pose.phi).abs() < 1e-9,
+                "row {k}: {:?} vs {:?}",
+                hot.pose,
+                cold.pose
+            );
+            for i in 0..3 {
+                assert!((hot.lambda[i] - cold.lambda[i]).abs() < 1e-7, "row {k}");
+            }
+        }
     }
 
     #[test]
