@@ -63,13 +63,18 @@ pub fn write_report(dir: &Path, a: &Attribution, inputs: &str) -> Result<PathBuf
     }
     let _ = writeln!(
         md,
-        "\n**Verdict: {}**. Remaining held-out RMS of the weighted residual {:.3} mm, {:.3} mm above \
+        "\n**Verdict: {}{}**. Remaining held-out RMS of the weighted residual {:.3} mm, {:.3} mm above \
          what the capture noise explains.\n\n![residual over time](residual_time.svg)\n\n\
          (Each mark is the largest residual of a short run of consecutive held-out rows.)",
         match a.verdict {
             Verdict::Explained => "explained",
             Verdict::PartlyExplained => "partly explained",
             Verdict::Unexplained => "unexplained",
+        },
+        if a.timing_finding.is_some() {
+            ", with a timing declaration error (see Timing)"
+        } else {
+            ""
         },
         a.remaining_rms_mm,
         a.remaining_excess_mm
