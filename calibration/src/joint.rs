@@ -271,3 +271,127 @@ pub fn refine(
         evaluations: fit.evaluations,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use pcr_kinematics::Pose;
+    use pcr_robot::TendonMapSpec;
+
+    /// A robot whose paper parameters are off the nominal, with an affine map.
+    fn truth() -> RobotConfig {
+        let mut t = RobotConfig::nominal();
+        let d = [
+            (0.3, -0.4, 0.2, -0.3),
+            (-0.2, 0.5, -0.1, 0.2),
+            (0.1, 0.3, 0.3, -0.1),
+        ];
+        for (i, (l, (dpsi, dlc, drp, dth))) in t.legs.iter_mut().zip(d).enumerate() {
+            l.psi_deg += dpsi;
+            l.l_c_mm += dlc;
+            l.r_p_mm += drp;
+            l.theta_p_deg += dth;
+            l.tendon_map = TendonMapSpec {
+                model: TendonMapKind::Affine,
+                coeffs: vec![1e-4 * (i as f64 - 1.0), 1.05e-3 + 2e-5 * i as f64],
+            };
+        }
+        t
+    }
+
+    /// Exact observations of `truth` at poses of a grid.
+    fn observations(truth: &RobotConfig) -> ([Vec<LegObservation>; 3], Vec<PoseObservation>) {
+        let robot = Robot::new(truth).unwrap();
+        let (mut legs, mut poses) = (<[Vec<LegObservation>; 3]>::default(), Vec::new());
+        for x in [-30.0, 0.0, 30.0] {
+            for y in [-25.0, 0.0, 25.0] {
+                for phi in [-8.0, 0.0, 8.0] {
+                    let s = robot.ik(&Pose::from_mm_deg(x, y, phi)).unwrap();
+                    let q = std::array::from_fn(|i| robot.kappa_to_steps(i, s.kappa[i]).unwrap());
+                    for (i, obs) in legs.iter_mut().enumerate() {
+                        let dl_mm = q[i] * truth.legs[i].actuation.mm_per_step();
+                        let m = step1::predict_m(&Leg::from_config(&truth.legs[i]), dl_mm);
+                        obs.push(LegObservation { dl_mm, m });
+                    }
+                    poses.push(PoseObservation {
+                        q,
+                        pose: [x, y, phi],
+                    });
+                }
+            }
+        }
+        (legs, poses)
+    }
+
+    fn paper_affine() -> JointParams {
+        JointParams {
+            legs: FreeGeometry::PAPER,
+            platform: Step2Params::PAPER,
+            kind: TendonMapKind::Affine,
+        }
+    }
+
+    #[test]
+    fn recovers_every_parameter_from_exact_data() {
+        let truth = truth();
+        let (legs, poses) = observations(&truth);
+        // Start off the truth in every parameter (as a two-step result would be).
+        let mut start = truth.clone();
+        for l in &mut start.legs {
+            l.psi_deg -= 0.2;
+            l.l_c_mm += 0.3;
+            l.r_p_mm -= 0.2;
+            l.theta_p_deg += 0.2;
+            l.tendon_map.coeffs[1] *= 1.02;
+        }
+        let obs = JointObservations {
+            legs: &legs,
+            poses: &poses,
+        };
+        let fit = refine(&RobotConfig::nominal(), &start, paper_affine(), obs, 1.0).unwrap();
+        assert!(fit.converged, "{}", fit.status);
+        assert!(fit.start_rms_mm > 0.05 && fit.rms_mm < 1e-7, "{fit:?}");
+        assert_eq!(fit.params.len(), 3 * 4 + 6);
+        assert_eq!((fit.m_residuals, fit.pose_residuals), (6 * 27, 3 * 27));
+        for (l, t) in fit.config.legs.iter().zip(&truth.legs) {
+            assert!(
+                (l.psi_deg - t.psi_deg).abs() < 1e-5,
+                "{} {}",
+                l.psi_deg,
+                t.psi_deg
+            );
+            assert!((l.l_c_mm - t.l_c_mm).abs() < 1e-5);
+            assert!((l.r_p_mm - t.r_p_mm).abs() < 1e-5);
+            assert!((l.theta_p_deg - t.theta_p_deg).abs() < 1e-5);
+            for (a, b) in l.tendon_map.coeffs.iter().zip(&t.tendon_map.coeffs) {
+                assert!((a - b).abs() < 1e-9, "{a} {b}");
+            }
+        }
+        let names: Vec<&str> = fit.params.iter().map(|p| p.name.as_str()).collect();
+        assert_eq!(&names[..4], &["psi_deg[1]", "l_c_mm[1]", "k0[1]", "k1[1]"]);
+        assert_eq!(names[12], "r_p_mm[1]");
+    }
+
+    #[test]
+    fn a_start_with_another_map_or_too_few_residuals_is_an_error() {
+        let truth = truth();
+        let (legs, poses) = observations(&truth);
+        let obs = JointObservations {
+            legs: &legs,
+            poses: &poses,
+        };
+        let free = JointParams {
+            kind: TendonMapKind::Poly2,
+            ..paper_affine()
+        };
+        let e = refine(&RobotConfig::nominal(), &truth, free, obs, 1.0).unwrap_err();
+        assert!(matches!(e, JointError::MixedMaps { leg: 1, .. }), "{e}");
+        let few: [Vec<LegObservation>; 3] = std::array::from_fn(|i| legs[i][..1].to_vec());
+        let obs = JointObservations {
+            legs: &few,
+            poses: &poses[..1],
+        };
+        let e = refine(&RobotConfig::nominal(), &truth, paper_affine(), obs, 1.0).unwrap_err();
+        assert!(matches!(e, JointError::TooFew { params: 18, .. }), "{e}");
+    }
+}
