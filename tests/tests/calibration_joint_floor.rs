@@ -264,3 +264,95 @@ fn the_paper_method_keeps_the_two_steps() {
     assert_eq!(fit.params.len(), 3 * per_leg + 6);
     assert!(fit.params.iter().all(|p| p.std.is_some_and(|s| s > 0.0)));
 }
+
+/// A noise-free recording of the paper's 189 calibration poses (one row each, the plant's
+/// static truth for the commanded motors: `TruthModel`).
+fn truth_recording(plant: &PlantConfig) -> Recording {
+    let nominal = RobotConfig::nominal();
+    let truth = pcr_plant::TruthModel::new(&nominal, plant).unwrap();
+    let model = Robot::nominal();
+    let set =
+        pcr_experiments::CalibrationSet::design(&model, &CalibrationOptions::default()).unwrap();
+    let mut rec = Recording {
+        columns: [
+            "t_s", "q1", "q2", "q3", "x_mm", "y_mm", "phi_deg", "m1x_mm", "m1y_mm", "m2x_mm",
+            "m2y_mm", "m3x_mm", "m3y_mm", "pose_id", "settled", "set",
+        ]
+        .map(String::from)
+        .to_vec(),
+        ..Recording::default()
+    };
+    for (k, p) in set.poses.iter().enumerate() {
+        let s = model.ik(&p.pose).unwrap();
+        let q: [i32; 3] =
+            std::array::from_fn(|i| model.kappa_to_steps(i, s.kappa[i]).unwrap().round() as i32);
+        let eq = truth.solve_steps(&q.map(f64::from)).unwrap();
+        let mut row = Row::new(0.02 * k as f64, q);
+        row.pose = [
+            Some(eq.pose[0]),
+            Some(eq.pose[1]),
+            Some(eq.pose[2].to_degrees()),
+        ];
+        row.m = eq.m.map(|m| [Some(m[0]), Some(m[1])]);
+        row.pose_id = Some(p.pose_id);
+        row.settled = Some(true);
+        row.set = Some(p.set);
+        rec.rows.push(row);
+    }
+    rec
+}
+
+/// What remains above the floor, split by cause on noise-free data (docs/calibration.md, "How
+/// close to the noise floor"): prints the held-out platform position RMS of the two steps, the
+/// joint refinement and the joint refinement of the extended set, for the prototype's geometry
+/// and map, the map alone, and the geometry alone with a linear map (function 2 forced).
+/// `cargo test -p pcr-integration-tests --test calibration_joint_floor -- --ignored --nocapture`
+#[test]
+#[ignore = "a measurement for the documentation, not a check"]
+fn model_error_breakdown() {
+    use pcr_calibration::calibrate::ParameterSet;
+    use pcr_robot::TendonMapKind;
+    let full = geometry_and_map_plant(1.0, false);
+    let mut map_only = full.clone();
+    map_only.geometry = PlantConfig::ideal().geometry;
+    let mut geometry_only = full.clone();
+    geometry_only.tendon_map.model = PlantConfig::ideal().tendon_map.model;
+    let cases = [
+        ("prototype geometry + tanh map", &full, None),
+        ("tanh map only", &map_only, None),
+        (
+            "geometry only, linear map",
+            &geometry_only,
+            Some(TendonMapKind::Affine),
+        ),
+    ];
+    for (name, plant, function) in cases {
+        let rec = truth_recording(plant);
+        let pos = |parameters| {
+            let opts = Options {
+                parameters,
+                function,
+                ..Options::default()
+            };
+            let cal = calibrate(&RobotConfig::nominal(), &rec, name, &opts).unwrap();
+            let joint = cal
+                .joint
+                .unwrap()
+                .accuracy
+                .test
+                .unwrap()
+                .pose
+                .position_rms_mm;
+            (
+                cal.paper.test.unwrap().pose.position_rms_mm,
+                joint,
+                cal.selected,
+            )
+        };
+        let (paper, joint, f) = pos(ParameterSet::Paper);
+        let (_, extended, _) = pos(ParameterSet::Extended);
+        println!(
+            "{name}: function {f}: two steps {paper:.4} mm, joint {joint:.4} mm, extended joint {extended:.4} mm"
+        );
+    }
+}
