@@ -706,8 +706,13 @@ fn maps_not_invertible(robot: &RobotConfig, start: &RobotConfig, obs: &LegSets) 
     })
 }
 
-/// A warning when the joint refinement predicts the held-out platform positions worse than
-/// the paper's two steps (it fits the training poses at least as well by construction).
+/// Held-out platform position RMS of the joint refinement above this multiple of the two steps'
+/// gets a warning: smaller differences are within the sampling error of a test set of tens of
+/// poses (docs/calibration.md).
+const JOINT_WORSE_WARNING: f64 = 1.05;
+
+/// A warning when the joint refinement predicts the held-out platform positions clearly worse
+/// than the paper's two steps (it fits the training poses at least as well by construction).
 fn compare_with_paper(
     joint: Option<&JointResult>,
     paper: &SplitAccuracy,
@@ -716,10 +721,10 @@ fn compare_with_paper(
     let (Some(j), Some(p)) = (joint.and_then(|j| j.accuracy.test), paper.test) else {
         return;
     };
-    if j.pose.position_rms_mm > p.pose.position_rms_mm {
+    if j.pose.position_rms_mm > JOINT_WORSE_WARNING * p.pose.position_rms_mm {
         warnings.push(format!(
             "the joint refinement predicts the test poses worse than the paper's two steps \
-             (platform position RMS {:.4} against {:.4} mm)",
+             (platform position RMS {:.4} against {:.4} mm): compare with --method paper",
             j.pose.position_rms_mm, p.pose.position_rms_mm
         ));
     }
