@@ -78,6 +78,48 @@ fn accuracy_rows(out: &mut String, label: &str, a: Option<&ModelAccuracy>) {
     );
 }
 
+/// The joint refinement's parameters (start: the two steps' values) with their uncertainties.
+fn joint_section(out: &mut String, cal: &Calibration) {
+    let Some(j) = &cal.joint else {
+        return;
+    };
+    let f = &j.fit;
+    let _ = writeln!(
+        out,
+        "\n## Joint refinement (every parameter of both steps on the M_i and the platform poses)\n\n\
+         {} M_i and {} platform residuals (one degree weighted as {:.3} mm); training residual RMS \
+         {:.4} mm at the two steps' result, {:.4} mm refined ({}, {} evaluations). The start column \
+         is the two steps' value; the standard errors are those of the joint fit.",
+        f.m_residuals,
+        f.pose_residuals,
+        f.phi_weight_mm_per_deg,
+        f.start_rms_mm,
+        f.rms_mm,
+        f.status,
+        f.evaluations
+    );
+    params_table(out, "parameter", &f.params);
+}
+
+/// The paper's two steps and the joint refinement side by side (with `Method::Joint`).
+fn method_rows(out: &mut String, cal: &Calibration) {
+    let Some(j) = &cal.joint else {
+        return;
+    };
+    accuracy_rows(out, "paper's two steps, train", Some(&cal.paper.train));
+    accuracy_rows(out, "joint, train", Some(&j.accuracy.train));
+    accuracy_rows(out, "paper's two steps, **test**", cal.paper.test.as_ref());
+    accuracy_rows(out, "joint, **test**", j.accuracy.test.as_ref());
+    let _ = writeln!(
+        out,
+        "\nThe calibrated robot (\"after\") is {}.",
+        match cal.used {
+            crate::calibrate::Method::Joint => "the joint refinement's",
+            crate::calibrate::Method::Paper => "the paper's two steps' (see the warnings)",
+        }
+    );
+}
+
 /// Writes `report.md` and its figures into `dir` (created if needed); returns the report path.
 pub fn write_report(
     dir: &Path,
@@ -172,6 +214,7 @@ pub fn write_report(
         cal.step2.phi_weight_mm_per_deg
     );
     params_table(&mut md, "parameter", &cal.step2.params);
+    joint_section(&mut md, cal);
     // Accuracy.
     let _ = writeln!(
         md,
@@ -184,6 +227,7 @@ pub fn write_report(
     accuracy_rows(&mut md, "after, train", Some(&cal.after.train));
     accuracy_rows(&mut md, "before, **test**", cal.before.test.as_ref());
     accuracy_rows(&mut md, "after, **test**", cal.after.test.as_ref());
+    method_rows(&mut md, cal);
     if !cal.warnings.is_empty() {
         let _ = writeln!(md, "\n## Warnings\n");
         for w in &cal.warnings {
