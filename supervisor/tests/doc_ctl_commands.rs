@@ -59,7 +59,7 @@ fn ctl_commands(file: &str, text: &str) -> Vec<CtlCommand> {
             out.push(CtlCommand {
                 at: at.clone(),
                 config: config.trim().to_string(),
-                words: words.trim().to_string(),
+                words: words.split_whitespace().collect::<Vec<_>>().join(" "),
             });
         }
     }
