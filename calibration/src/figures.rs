@@ -369,6 +369,7 @@ pub fn bars(
     c.configure_mesh()
         .x_desc(x_desc)
         .x_label_formatter(&|v: &f64| tick_label(*v))
+        .y_max_light_lines(0)
         .y_labels(n * 2 + 1)
         .y_label_formatter(&move |y: &f64| {
             let k = (y - 0.5).round();
