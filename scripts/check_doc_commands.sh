@@ -12,4 +12,5 @@ if [ -z "${PCR_BIN:-}" ]; then
   cargo build --release -q --bin pcr
   PCR_BIN="${CARGO_TARGET_DIR:-$PWD/target}/release/pcr"
 fi
+"$PY" scripts/doc_commands.py --self-test
 exec "$PY" scripts/doc_commands.py --pcr "$PCR_BIN" "$@"

@@ -82,7 +82,7 @@ def is_list_line(line: str) -> bool:
 
 def extract(path: Path):
     """Every command of one markdown file, in order."""
-    file = str(path.relative_to(ROOT))
+    file = str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else path.name
     lines = path.read_text(encoding="utf-8").split("\n")
     cmds = []
     prose = []  # (line number, text) of lines outside code blocks
@@ -265,6 +265,62 @@ def tail(text: str, n: int = 15) -> str:
     return "\n".join("      | " + l for l in lines[-n:])
 
 
+SAMPLE = """# Sample
+
+Text with `pcr calibrate` (a name) and `pcr plan square
+--side 40` (a command over a line break).
+
+    pcr ik --input a.csv   # a comment
+    # only a comment
+    pcr residuals --data a.csv \\
+        --out b.toml
+
+- a list item
+
+    indented list content, not code
+
+```toml
+name = "not a command"
+```
+
+```text
+a diagram
+```
+
+```
+pcr fk --input b.csv
+```
+"""
+
+
+def self_test():
+    """The extractor on SAMPLE, and the table's checks."""
+    d = Path(tempfile.mkdtemp(prefix="pcr-doc-selftest-"))
+    try:
+        md = d / "sample.md"
+        md.write_text(SAMPLE)
+        got = [(c.line, c.text) for c in extract(md)]
+        want = [
+            (3, "pcr plan square --side 40"),
+            (6, "pcr ik --input a.csv"),
+            (8, "pcr residuals --data a.csv --out b.toml"),
+            (24, "pcr fk --input b.csv"),
+        ]
+        assert got == want, got
+        table = d / "t.toml"
+        table.write_text(
+            '[[command]]\ndoc = "x"\nappend = "--y"\n'
+            '[[command]]\nmatch = "z.*"\ncovered = ["scripts/nothing.sh"]\nwhy = "w"\n'
+        )
+        _, entries, problems = load_table(table)
+        assert len(problems) == 2, problems
+        assert "needs a why" in problems[0] and "no file scripts/nothing.sh" in problems[1], problems
+        assert entries[1].matches("z 1") and not entries[1].matches("a z")
+    finally:
+        shutil.rmtree(d, ignore_errors=True)
+    print("self-test: ok")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--list", action="store_true", help="list the commands found and exit")
@@ -273,7 +329,11 @@ def main():
     ap.add_argument("--only", help="check only the commands containing this text")
     ap.add_argument("--keep", action="store_true", help="keep the scratch directory")
     ap.add_argument("--timeout", type=float, default=300.0, help="per command, s")
+    ap.add_argument("--self-test", action="store_true", help="check the extractor and exit")
     args = ap.parse_args()
+    if args.self_test:
+        self_test()
+        return 0
     cmds = [c for f in doc_files() for c in extract(f)]
     if args.list:
         for c in cmds:
