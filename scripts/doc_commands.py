@@ -18,7 +18,11 @@ import subprocess
 import sys
 import tempfile
 import time
-import tomllib
+
+try:
+    import tomllib
+except ImportError:  # Python < 3.11
+    sys.exit("doc_commands.py needs Python 3.11 or later (tomllib)")
 from dataclasses import dataclass
 from pathlib import Path
 
