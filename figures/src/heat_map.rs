@@ -105,11 +105,13 @@ pub fn draw_heat_map(path: &Path, h: &HeatMap) -> Result<(), String> {
     Ok(())
 }
 
-/// Top and bottom margins of the colour bar (pixels), as the map's plotting area.
+/// Top margin of the colour bar (pixels), about the map's plotting area's.
 const BAR_TOP: i32 = 60;
+/// Bottom margin of the colour bar (pixels).
 const BAR_BOTTOM: i32 = 55;
-/// Left edge and width of the colour strip in its area (pixels).
+/// Left edge of the colour strip in its area (pixels).
 const BAR_X: i32 = 10;
+/// Width of the colour strip (pixels).
 const BAR_W: i32 = 22;
 
 /// The colour bar of values `lo..hi`: a framed strip, ticks and labels on its right and the
@@ -160,9 +162,9 @@ fn draw_colour_bar<DB: DrawingBackend>(
     Ok(())
 }
 
-/// Five to eight round tick values over `lo..=hi` (steps of 1, 2 or 5 times a power of ten), with
+/// Three to eight round tick values over `lo..=hi` (steps of 1, 2 or 5 times a power of ten), with
 /// their labels at the step's decimals; the one value when `lo == hi`.
-pub fn bar_ticks(lo: f64, hi: f64) -> Vec<(f64, String)> {
+fn bar_ticks(lo: f64, hi: f64) -> Vec<(f64, String)> {
     if !(lo.is_finite() && hi.is_finite()) || hi < lo {
         return Vec::new();
     }

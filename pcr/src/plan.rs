@@ -87,10 +87,10 @@ enum Shape {
     /// point, the circle, a dwell of 0.2 s and a line back to --from.
     Circle {
         /// Radius, mm (the paper's 50 mm unless given).
-        #[arg(long, default_value_t = 50.0)]
+        #[arg(long, default_value_t = 50.0, allow_hyphen_values = true)]
         radius: f64,
         /// Speed along the path, mm/s (the paper's 50 mm/s unless given).
-        #[arg(long, default_value_t = 50.0)]
+        #[arg(long, default_value_t = 50.0, allow_hyphen_values = true)]
         speed: f64,
         /// Centre x, mm.
         #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
@@ -115,10 +115,10 @@ enum Shape {
     /// line back to --from.
     Square {
         /// Side length, mm (the paper's 50 mm unless given).
-        #[arg(long, default_value_t = 50.0)]
+        #[arg(long, default_value_t = 50.0, allow_hyphen_values = true)]
         side: f64,
         /// Speed along each side, mm/s (the paper's 50 mm/s unless given).
-        #[arg(long, default_value_t = 50.0)]
+        #[arg(long, default_value_t = 50.0, allow_hyphen_values = true)]
         speed: f64,
         /// Centre x, mm.
         #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
