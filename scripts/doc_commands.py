@@ -4,10 +4,11 @@
 The commands are read from the markdown itself: the lines of shell code blocks (indented blocks
 and fences without a language or with sh/bash/console) and the inline code spans that start like
 a command (`pcr ...`, `target/release/...`, `bash scripts/...`, `cargo ...`) and carry an option.
-Each one is run as written in a scratch directory (with `pcr` on PATH and a copy of configs/),
+Each one is run as written in a scratch directory (`pcr` on PATH, copies of configs/ and docs/),
 unless scripts/doc_commands.toml says otherwise: extra arguments that make it small, concrete
 commands for a synopsis with placeholders, the test that covers it, or why it is not run. A
-command that fails, and an entry of the table that matches no command of the docs, fail the check.
+command that fails, and an entry of the table that matches no command of the docs, fail the
+check.
 """
 
 import argparse
@@ -237,7 +238,8 @@ class QtmServer:
 
 def make_scratch(table, pcr_bin: Path):
     d = Path(tempfile.mkdtemp(prefix="pcr-doc-commands-"))
-    shutil.copytree(ROOT / "configs", d / "configs")
+    for sub in ("configs", "docs"):
+        shutil.copytree(ROOT / sub, d / sub)
     (d / "bin").mkdir()
     (d / "bin" / "pcr").symlink_to(pcr_bin)
     for name, text in table.get("files", {}).items():
@@ -318,7 +320,8 @@ def self_test():
         )
         _, entries, problems = load_table(table)
         assert len(problems) == 2, problems
-        assert "needs a why" in problems[0] and "no file scripts/nothing.sh" in problems[1], problems
+        assert "needs a why" in problems[0], problems
+        assert "no file scripts/nothing.sh" in problems[1], problems
         assert entries[1].matches("z 1") and not entries[1].matches("a z")
     finally:
         shutil.rmtree(d, ignore_errors=True)
@@ -411,7 +414,8 @@ def main():
         if not args.only:
             for e in entries:
                 if not e.used:
-                    failures.append(("table", f"{e.key}: matches no command of the docs (stale entry)"))
+                    stale = f"{e.key}: matches no command of the docs (stale entry)"
+                    failures.append(("table", stale))
     finally:
         qtm.stop()
         if args.keep:
