@@ -34,6 +34,85 @@ pub enum ReportError {
     Figure(#[from] FigureError),
 }
 
+/// A strongly correlated pair of parameters of one fit of a calibration.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CorrelatedPair {
+    /// The fit: `leg 1` .. `leg 3` (step 1) or `platform` (step 2).
+    pub fit: String,
+    /// First parameter.
+    pub a: String,
+    /// Second parameter.
+    pub b: String,
+    /// Their correlation coefficient.
+    pub rho: f64,
+}
+
+/// The strongly correlated parameter pairs of a calibration (|rho| above
+/// [`crate::step1::CORRELATION_WARNING`]), step 1 per leg then step 2.
+pub fn correlated_pairs(cal: &Calibration) -> Vec<CorrelatedPair> {
+    let legs = cal.step1.iter().enumerate().map(|(k, f)| {
+        (
+            format!("leg {}", f.leg.unwrap_or(k) + 1),
+            f.correlated.as_slice(),
+        )
+    });
+    legs.chain(std::iter::once((
+        "platform".to_string(),
+        cal.step2.correlated.as_slice(),
+    )))
+    .flat_map(|(fit, pairs)| {
+        pairs.iter().map(move |c| CorrelatedPair {
+            fit: fit.clone(),
+            a: c.a.clone(),
+            b: c.b.clone(),
+            rho: c.rho,
+        })
+    })
+    .collect()
+}
+
+/// The calibration's warnings other than the correlated pairs ([`correlated_pairs`] lists
+/// those), e.g. parameters on their bounds or a fit that did not converge.
+pub fn other_warnings(cal: &Calibration) -> Vec<&str> {
+    let pairs = correlated_pairs(cal);
+    cal.warnings
+        .iter()
+        .filter(|w| {
+            !pairs
+                .iter()
+                .any(|p| w.contains(&format!("{} and {} are strongly correlated", p.a, p.b)))
+        })
+        .map(String::as_str)
+        .collect()
+}
+
+/// One line naming the strongly correlated pairs, grouped by fit, e.g. `leg 1: a/b, c/d;
+/// platform: e/f` (`None` when there are none).
+pub fn correlated_summary(cal: &Calibration) -> Option<String> {
+    let pairs = correlated_pairs(cal);
+    if pairs.is_empty() {
+        return None;
+    }
+    let mut groups: Vec<(String, Vec<String>)> = Vec::new();
+    for p in &pairs {
+        let pair = format!("{}/{}", p.a, p.b);
+        match groups.iter_mut().find(|g| g.0 == p.fit) {
+            Some(g) => g.1.push(pair),
+            None => groups.push((p.fit.clone(), vec![pair])),
+        }
+    }
+    let text: Vec<String> = groups
+        .iter()
+        .map(|(fit, v)| format!("{fit}: {}", v.join(", ")))
+        .collect();
+    Some(format!(
+        "{} strongly correlated parameter pairs (|rho| > {}; the data hardly separate them): {}",
+        pairs.len(),
+        crate::step1::CORRELATION_WARNING,
+        text.join("; ")
+    ))
+}
+
 /// Formats an optional number.
 pub fn opt(v: Option<f64>, digits: usize) -> String {
     v.map_or("-".into(), |v| format!("{v:.digits$}"))
@@ -228,10 +307,25 @@ pub fn write_report(
     accuracy_rows(&mut md, "before, **test**", cal.before.test.as_ref());
     accuracy_rows(&mut md, "after, **test**", cal.after.test.as_ref());
     method_rows(&mut md, cal);
-    if !cal.warnings.is_empty() {
+    let others = other_warnings(cal);
+    if !others.is_empty() {
         let _ = writeln!(md, "\n## Warnings\n");
-        for w in &cal.warnings {
+        for w in others {
             let _ = writeln!(md, "- {w}");
+        }
+    }
+    let pairs = correlated_pairs(cal);
+    if !pairs.is_empty() {
+        let _ = writeln!(
+            md,
+            "\n## Strongly correlated parameters\n\n\
+             Pairs whose estimates correlate with |rho| > {}: the data hardly separate them, so \
+             each value of a pair is uncertain along the other (a combination of the two is \
+             well determined).\n\n| fit | parameters | rho |\n|---|---|---|",
+            crate::step1::CORRELATION_WARNING
+        );
+        for p in &pairs {
+            let _ = writeln!(md, "| {} | {}, {} | {:+.3} |", p.fit, p.a, p.b, p.rho);
         }
     }
     let _ = writeln!(

@@ -171,7 +171,7 @@ fn run_robot(a: RobotArgs) -> anyhow::Result<()> {
     }
     let static_data = StaticData::from_recording(&rec, &origin, opts.seed, opts.test_fraction)?;
     let cal = calibrate::calibrate_data(&start, &static_data, &opts)?;
-    print_summary(&cal);
+    print_summary(&cal, a.report.as_deref());
     if let Some(out) = &a.out {
         write_file(out, &calibrate::robot_file(&cal, &utc_now()))?;
         println!("calibrated robot: {}", out.display());
@@ -187,7 +187,7 @@ fn run_robot(a: RobotArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn print_summary(cal: &Calibration) {
+fn print_summary(cal: &Calibration, report: Option<&Path>) {
     println!(
         "{}: {} static poses ({} train, {} test)",
         cal.data.file, cal.data.poses, cal.data.train, cal.data.test
@@ -245,8 +245,16 @@ fn print_summary(cal: &Calibration) {
     );
     line("train", Some(&cal.before.train), Some(&cal.after.train));
     line("test ", cal.before.test.as_ref(), cal.after.test.as_ref());
-    for w in &cal.warnings {
+    for w in pcr_calibration::report::other_warnings(cal) {
         eprintln!("warning: {w}");
+    }
+    // The correlated pairs in one line; their coefficients are in the report.
+    if let Some(line) = pcr_calibration::report::correlated_summary(cal) {
+        let detail = match report {
+            Some(dir) => format!("rho in {}", dir.join("report.md").display()),
+            None => "rho with --report DIR or --json FILE".into(),
+        };
+        eprintln!("warning: {line} ({detail})");
     }
 }
 

@@ -2,7 +2,7 @@
 //! evidence, every candidate's score, the verdict, and the residual plots behind each decision.
 
 use crate::attribution::{Attribution, Verdict};
-use pcr_calibration::figures::{curve_panels, CurvePanel, FigureError};
+use pcr_calibration::figures::{curve_panels, curve_panels_shared, CurvePanel, FigureError};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -164,7 +164,8 @@ pub fn write_report(dir: &Path, a: &Attribution, inputs: &str) -> Result<PathBuf
             .map(|p| (p.0, p.2))
             .collect::<Vec<_>>(),
     );
-    curve_panels(
+    // One scale for both panels, so that the gain shows.
+    curve_panels_shared(
         &dir.join("residual_time.svg"),
         "Position residual of held-out rows over time",
         &[
