@@ -355,7 +355,7 @@ pub fn calibrate_data(
     if !s2.converged {
         warnings.push(format!("step 2 stopped before converging ({})", s2.status));
     }
-    note_params(&mut warnings, "platform", &s2.params, &s2.correlated);
+    note_params(&mut warnings, "platform", &s2.params);
     let mut paper_robot = s2.config.clone();
     paper_robot.name = format!("{}, calibrated from {}", start.name, data.origin);
     check_usable(&paper_robot, &origin)?;
@@ -598,12 +598,7 @@ fn apply_step1(start: &RobotConfig, fits: &[LegFit], warnings: &mut Vec<String>)
                 f.status
             ));
         }
-        note_params(
-            warnings,
-            &format!("leg {}", i + 1),
-            &f.params,
-            &f.correlated,
-        );
+        note_params(warnings, &format!("leg {}", i + 1), &f.params);
     }
     robot
 }
@@ -644,7 +639,7 @@ fn refine_jointly(
                     fit.status
                 ));
             }
-            note_params(warnings, "joint fit", &fit.params, &fit.correlated);
+            note_params(warnings, "joint fit", &fit.params);
             let accuracy = split_accuracy(&fit.config, data);
             Some(JointResult { fit, accuracy })
         }
@@ -730,12 +725,9 @@ fn compare_with_paper(
     }
 }
 
-fn note_params(
-    warnings: &mut Vec<String>,
-    what: &str,
-    params: &[step1::Param],
-    correlated: &[step1::Correlated],
-) {
+/// Warns of the parameters that end on a bound. The strongly correlated pairs are not repeated
+/// as warnings: `report::correlated_summary` names them all in one line, the report lists each.
+fn note_params(warnings: &mut Vec<String>, what: &str, params: &[step1::Param]) {
     for p in params {
         if p.at_bound {
             warnings.push(format!(
@@ -743,12 +735,6 @@ fn note_params(
                 p.name, p.value, p.unit
             ));
         }
-    }
-    for c in correlated {
-        warnings.push(format!(
-            "{what}: {} and {} are strongly correlated (rho = {:+.3}): the data hardly separate them",
-            c.a, c.b, c.rho
-        ));
     }
 }
 

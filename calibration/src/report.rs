@@ -48,7 +48,7 @@ pub struct CorrelatedPair {
 }
 
 /// The strongly correlated parameter pairs of a calibration (|rho| above
-/// [`crate::step1::CORRELATION_WARNING`]), step 1 per leg then step 2.
+/// [`crate::step1::CORRELATION_WARNING`]), step 1 per leg, step 2, then the joint refinement.
 pub fn correlated_pairs(cal: &Calibration) -> Vec<CorrelatedPair> {
     let legs = cal.step1.iter().enumerate().map(|(k, f)| {
         (
@@ -60,6 +60,11 @@ pub fn correlated_pairs(cal: &Calibration) -> Vec<CorrelatedPair> {
         "platform".to_string(),
         cal.step2.correlated.as_slice(),
     )))
+    .chain(
+        cal.joint
+            .iter()
+            .map(|j| ("joint fit".to_string(), j.fit.correlated.as_slice())),
+    )
     .flat_map(|(fit, pairs)| {
         pairs.iter().map(move |c| CorrelatedPair {
             fit: fit.clone(),
@@ -71,19 +76,10 @@ pub fn correlated_pairs(cal: &Calibration) -> Vec<CorrelatedPair> {
     .collect()
 }
 
-/// The calibration's warnings other than the correlated pairs ([`correlated_pairs`] lists
-/// those), e.g. parameters on their bounds or a fit that did not converge.
+/// The calibration's warnings: parameters on their bounds, a fit that did not converge ...
+/// (the correlated pairs are not among them: [`correlated_pairs`] lists those).
 pub fn other_warnings(cal: &Calibration) -> Vec<&str> {
-    let pairs = correlated_pairs(cal);
-    cal.warnings
-        .iter()
-        .filter(|w| {
-            !pairs
-                .iter()
-                .any(|p| w.contains(&format!("{} and {} are strongly correlated", p.a, p.b)))
-        })
-        .map(String::as_str)
-        .collect()
+    cal.warnings.iter().map(String::as_str).collect()
 }
 
 /// One line naming the strongly correlated pairs, grouped by fit, e.g. `leg 1: a/b, c/d;

@@ -62,6 +62,7 @@ fn correlated_parameters_are_one_line_with_the_detail_in_the_report() {
         .unwrap()
         .iter()
         .chain(std::iter::once(&j["step2"]))
+        .chain(j["joint"].get("fit"))
     {
         for c in fit["correlated"].as_array().unwrap() {
             pairs.push(format!(
@@ -98,7 +99,9 @@ fn correlated_parameters_are_one_line_with_the_detail_in_the_report() {
         .expect("a section on the correlated parameters");
     let rows: Vec<&str> = table
         .lines()
-        .filter(|l| l.starts_with("| leg") || l.starts_with("| platform"))
+        .filter(|l| {
+            l.starts_with("| leg") || l.starts_with("| platform") || l.starts_with("| joint fit")
+        })
         .collect();
     assert_eq!(rows.len(), pairs.len(), "{table}");
     for r in &rows {

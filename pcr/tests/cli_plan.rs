@@ -114,7 +114,11 @@ fn a_plan_runs_on_the_ideal_plant_and_lands_on_the_planned_poses() {
     // The timing contract: a row's pose is measured before its command is sent (one 20 ms
     // setpoint spacing).
     let text = std::fs::read_to_string(&rec).unwrap();
-    assert!(text.contains("# command_delay_s = 0.02\n"), "{}", &text[..400]);
+    assert!(
+        text.contains("# command_delay_s = 0.02\n"),
+        "{}",
+        &text[..400]
+    );
     let mut r = csv::ReaderBuilder::new()
         .comment(Some(b'#'))
         .from_path(&rec)
