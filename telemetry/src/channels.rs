@@ -89,7 +89,7 @@ pub struct Telemetry {
     tf: Channel<FrameTransforms>,
     driver: Arc<RawChannel>,
     correction: Arc<RawChannel>,
-    log: Channel<Log>,
+    log: Arc<Channel<Log>>,
     events: Arc<RawChannel>,
     stats: BTreeMap<String, Arc<RawChannel>>,
     scene: Option<RobotScene>,
@@ -137,7 +137,7 @@ impl Telemetry {
             tf: ctx.channel_builder(topics::TF).build(),
             driver: json_channel(&ctx, topics::DRIVER, schemas::driver_state())?,
             correction: json_channel(&ctx, topics::CORRECTION, schemas::correction())?,
-            log: ctx.channel_builder(topics::LOG).build(),
+            log: Arc::new(ctx.channel_builder(topics::LOG).build()),
             events: json_channel(&ctx, topics::EVENTS, schemas::run_event())?,
             stats: BTreeMap::new(),
             scene,
@@ -256,23 +256,10 @@ impl Telemetry {
         Ok(())
     }
 
-    /// A log line (`foxglove.Log`) of `name` at chain time `t_s`.
-    pub fn log_line(
-        &self,
-        level: foxglove::messages::log::Level,
-        name: &str,
-        message: &str,
-        t_s: f64,
-    ) {
-        let m = Log {
-            timestamp: Some(scene::timestamp(t_s)),
-            level: level as i32,
-            message: message.into(),
-            name: name.into(),
-            file: String::new(),
-            line: 0,
-        };
-        self.log.log_with_time(&m, nanos(t_s));
+    /// The log channel, to log lines from anywhere (`foxglove.Log`; it can be sent to other
+    /// threads).
+    pub fn log_lines(&self) -> LogLines {
+        LogLines(self.log.clone())
     }
 
     /// A run event at chain time `t_s`.
@@ -284,6 +271,34 @@ impl Telemetry {
             "text": e.text,
         });
         log_json(&self.events, &v, t_s);
+    }
+}
+
+/// The log channel of a [`Telemetry`] (`foxglove.Log`).
+#[derive(Clone)]
+pub struct LogLines(Arc<Channel<Log>>);
+
+impl std::fmt::Debug for LogLines {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("LogLines").finish_non_exhaustive()
+    }
+}
+
+/// The level of a log line.
+pub use foxglove::messages::log::Level as LogLevel;
+
+impl LogLines {
+    /// A line of `name` (the supervisor or a process) at chain time `t_s`.
+    pub fn line(&self, level: LogLevel, name: &str, message: &str, t_s: f64) {
+        let m = Log {
+            timestamp: Some(scene::timestamp(t_s)),
+            level: level as i32,
+            message: message.into(),
+            name: name.into(),
+            file: String::new(),
+            line: 0,
+        };
+        self.0.log_with_time(&m, nanos(t_s));
     }
 }
 

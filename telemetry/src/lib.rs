@@ -26,7 +26,7 @@ pub mod scene;
 pub mod schemas;
 pub mod topics;
 
-pub use channels::{CycleStats, RunEvent, RunEventKind, Telemetry};
+pub use channels::{CycleStats, LogLevel, LogLines, RunEvent, RunEventKind, Telemetry};
 pub use convert::{convert, ConvertSummary};
 pub use error::TelemetryError;
 pub use live::LiveServer;
