@@ -75,3 +75,40 @@ pub fn shm_leftovers(prefix: &str) -> Vec<String> {
         })
         .unwrap_or_default()
 }
+
+/// The test venv's Python (`scripts/setup.sh`: the `mcap` reader and the `websockets` client of
+/// `scripts/requirements.txt`); its absence fails the test, saying so.
+pub fn venv_python() -> PathBuf {
+    let p = workspace().join(".venv/bin/python");
+    assert!(
+        p.exists(),
+        "{} is missing: run `bash scripts/setup.sh` (installs the Python checkers' packages of \
+         scripts/requirements.txt)",
+        p.display()
+    );
+    p
+}
+
+/// Checks a run's MCAP against its CSV with the independent reader (`tests/py/check_mcap.py`,
+/// options `more`); fails the test with the checker's message. Returns its summary line.
+pub fn check_mcap(mcap: &Path, csv: &Path, more: &[&str]) -> String {
+    let o = Command::new(venv_python())
+        .arg(workspace().join("tests/py/check_mcap.py"))
+        .arg(mcap)
+        .arg(csv)
+        .args(more)
+        .output()
+        .expect("python runs");
+    let out = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(
+        o.status.success(),
+        "{out}{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    out
+}
+
+/// The MCAP beside a recording (`<same stem>.mcap`).
+pub fn mcap_beside(csv: &Path) -> PathBuf {
+    csv.with_extension("mcap")
+}
