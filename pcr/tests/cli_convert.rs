@@ -99,6 +99,26 @@ fn any_recording_converts_to_an_mcap_the_reader_matches_with_the_csv() {
 }
 
 #[test]
+fn a_planned_program_converts_with_its_planned_poses_only() {
+    // `pcr plan`'s output is a recording of the format: planned poses, commanded steps and
+    // further columns (speed, curvatures), nothing measured.
+    let d = tempfile::tempdir().unwrap();
+    let csv = repo().join("docs/figures/plan_circle.csv");
+    let mcap = d.path().join("circle.mcap");
+    let o = pcr(&[
+        "convert",
+        "docs/figures/plan_circle.csv",
+        "--mcap",
+        mcap.to_str().unwrap(),
+        "--robot",
+        "configs/robot.toml",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r = check_mcap(&mcap, &csv, &["--scene"]);
+    assert!(!r.contains("/pose/measured"), "{r}");
+}
+
+#[test]
 fn bad_input_is_an_error_naming_it() {
     let d = tempfile::tempdir().unwrap();
     let out = d.path().join("x.mcap");
