@@ -95,6 +95,9 @@ async def run(a):
                 msg = await asyncio.wait_for(ws.recv(), timeout=end - now)
             except asyncio.TimeoutError:
                 break
+            except websockets.exceptions.ConnectionClosed:
+                report["closed_by_server"] = True
+                break
             if isinstance(msg, bytes) and msg and msg[0] == OP_MESSAGE_DATA:
                 sub_id, log_time = struct.unpack_from("<IQ", msg, 1)
                 if sub_id == 1:
