@@ -145,6 +145,10 @@ impl Supervisor {
                 ));
             }
         }
+        // The live view first: a busy port is refused before anything of the chain exists
+        // (after the clearer refusal of a second supervisor of the same configuration).
+        ControlSocket::check_free(&cfg.socket_path())?;
+        let mut live = Live::new(&cfg, &robot_path)?;
         let node = ChainNode::new(
             &format!("pcr-supervisor-{}", std::process::id()),
             &cfg.iceoryx2_prefix,
@@ -183,8 +187,8 @@ impl Supervisor {
                 }
             );
         }
+        live.subscribe(&cfg, &node)?;
         let socket = ControlSocket::bind(&cfg.socket_path())?;
-        let live = Live::new(&cfg, &robot_path, &node)?;
         let now = Instant::now();
         let procs = processes::table(&cfg, now);
         let cpu_latency = cfg

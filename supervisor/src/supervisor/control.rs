@@ -20,16 +20,22 @@ pub(super) struct ControlSocket {
 }
 
 impl ControlSocket {
+    /// Refuses when another supervisor listens on `path`.
+    pub(super) fn check_free(path: &Path) -> Result<()> {
+        if path.exists() && UnixStream::connect(path).is_ok() {
+            return Err(anyhow!(
+                "another supervisor is listening on {}",
+                path.display()
+            ));
+        }
+        Ok(())
+    }
+
     /// Listens on `path` (non-blocking); refuses when another supervisor listens there, removes
     /// a stale socket file.
     pub(super) fn bind(path: &Path) -> Result<Self> {
+        Self::check_free(path)?;
         if path.exists() {
-            if UnixStream::connect(path).is_ok() {
-                return Err(anyhow!(
-                    "another supervisor is listening on {}",
-                    path.display()
-                ));
-            }
             let _ = std::fs::remove_file(path);
         }
         let listener = UnixListener::bind(path)

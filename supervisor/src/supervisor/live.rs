@@ -7,7 +7,7 @@
 use super::processes::Proc;
 use super::Supervisor;
 use crate::config::{ProcessName, SupervisorConfig};
-use anyhow::{Context, Result};
+use anyhow::{anyhow, Result};
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use pcr_messages::{services as s, Correction, DriverStateMsg};
@@ -41,7 +41,7 @@ pub(super) struct Live {
 
 impl Live {
     /// The channels (the robot drawn from `robot`), and the live server of `[live]`.
-    pub(super) fn new(cfg: &SupervisorConfig, robot: &Path, node: &ChainNode) -> Result<Self> {
+    pub(super) fn new(cfg: &SupervisorConfig, robot: &Path) -> Result<Self> {
         let scene = match pcr_telemetry::convert::robot_scene(robot) {
             Ok(s) => Some(s),
             Err(e) => {
@@ -54,7 +54,7 @@ impl Live {
         let server = match &cfg.live {
             Some(l) => {
                 let server = LiveServer::start(&telemetry, "pcr-supervisor", &l.host, l.port)
-                    .with_context(|| "key `live` (host, port)".to_string())?;
+                    .map_err(|e| anyhow!("key `live` (host, port): {e}"))?;
                 eprintln!(
                     "pcr-supervisor: live view at {} (Foxglove: Open connection, Foxglove \
                      WebSocket; layout docs/foxglove-layout.json)",
@@ -64,16 +64,19 @@ impl Live {
             }
             None => None,
         };
-        let sub_correction = if cfg.process.iter().any(|p| p.name == ProcessName::Mocap) {
-            Some(node.subscriber::<Correction>(s::CORRECTION)?)
-        } else {
-            None
-        };
         Ok(Self {
             telemetry: Rc::new(RefCell::new(telemetry)),
             server,
-            sub_correction,
+            sub_correction: None,
         })
+    }
+
+    /// Subscribes to the corrections (configurations with a mocap process).
+    pub(super) fn subscribe(&mut self, cfg: &SupervisorConfig, node: &ChainNode) -> Result<()> {
+        if cfg.process.iter().any(|p| p.name == ProcessName::Mocap) {
+            self.sub_correction = Some(node.subscriber::<Correction>(s::CORRECTION)?);
+        }
+        Ok(())
     }
 
     /// The channels (shared with a run's MCAP sink).
