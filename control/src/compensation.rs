@@ -1,8 +1,9 @@
 //! Compensation of the effects a robot file declares (`[effects]`, found by `pcr residuals`):
 //! the inverse of the extended model's prediction chain, applied to what the chain commands.
 //!
-//! - motor side, after the IK ([`MotorCompensation`]): creep (the predicted tendon elongation is
-//!   added to the commanded displacement), periodic transmission errors (the motor is commanded
+//! - motor side, after the IK ([`MotorCompensation`]): creep and drift (the predicted tendon
+//!   elongation is added to the commanded displacement; drift's grows with the time since the
+//!   first command), periodic transmission errors (the motor is commanded
 //!   where its output reaches the target), backlash (half the play added in the direction of
 //!   motion, so that a reversal takes the slack up at once);
 //! - compliance: the IK of the loaded model (`Robot::ik_loaded`) instead of the rigid one;
@@ -35,6 +36,8 @@ pub struct MotorCompensation {
     /// Predicted tendon elongation, mm.
     creep: [f64; 3],
     last_t: Option<f64>,
+    /// Time of the first command, s (drift's origin).
+    first_t: Option<f64>,
 }
 
 impl MotorCompensation {
@@ -47,13 +50,14 @@ impl MotorCompensation {
             last_target: None,
             creep: [0.0; 3],
             last_t: None,
+            first_t: None,
         }
     }
 
     /// Whether any motor-side effect is compensated.
     pub fn is_active(&self) -> bool {
         let e = &self.effects;
-        e.backlash.is_some() || e.creep.is_some() || !e.periodic.is_empty()
+        e.backlash.is_some() || e.creep.is_some() || e.drift.is_some() || !e.periodic.is_empty()
     }
 
     /// The motor positions (steps, not rounded) to command at time `t_s` so that the outputs
@@ -71,6 +75,13 @@ impl MotorCompensation {
             }
         }
         self.last_t = Some(t_s);
+        // Drift: the tendon is longer by rate * (t - t_first), pull that further.
+        let t0 = *self.first_t.get_or_insert(t_s);
+        if let Some(d) = &self.effects.drift {
+            for i in 0..3 {
+                q[i] += d.rate_mm_per_s[i] * (t_s - t0).max(0.0) / self.mm_per_step[i];
+            }
+        }
         // Periodic: output = m - A sin(2 pi m / P + ph); solve for the motor m by fixed point.
         for p in &self.effects.periodic {
             let i = (p.motor as usize).clamp(1, 3) - 1;
@@ -176,6 +187,29 @@ mod tests {
             q = c.command(k as f64 * 0.02, [300.0, 0.0, 0.0]);
         }
         assert!((q[0] - (300.0 + 0.02 * 300.0)).abs() < 1e-3, "{q:?} {mmps}");
+    }
+
+    #[test]
+    fn drift_compensation_pulls_the_elongation_grown_since_the_first_command() {
+        let r = robot(Effects {
+            drift: Some(pcr_robot::effects::Drift {
+                rate_mm_per_s: [0.0, 0.002, -0.001],
+            }),
+            ..Effects::default()
+        });
+        let mmps: [f64; 3] = std::array::from_fn(|i| r.legs[i].actuation.mm_per_step());
+        let mut c = MotorCompensation::new(&r);
+        assert!(c.is_active());
+        let q0 = c.command(5.0, [200.0, 200.0, 200.0]);
+        assert_eq!(
+            q0,
+            [200.0, 200.0, 200.0],
+            "nothing has grown at the first command"
+        );
+        let q = c.command(105.0, [200.0, 200.0, 200.0]);
+        assert!((q[0] - 200.0).abs() < 1e-12);
+        assert!((q[1] - (200.0 + 0.2 / mmps[1])).abs() < 1e-9, "{q:?}");
+        assert!((q[2] - (200.0 - 0.1 / mmps[2])).abs() < 1e-9, "{q:?}");
     }
 
     #[test]

@@ -219,6 +219,12 @@ pub fn run_in_process<W: Write>(
     meta.extend(setup.metadata.iter().cloned());
     meta.extend(rest);
     meta.push(("period_s".into(), pcr_recording::number(setup.period_s)));
+    // The timing contract: the drive executes a row's command over the next cycle, so the pose
+    // of a row answers the command of the row before.
+    meta.push((
+        pcr_recording::COMMAND_DELAY_KEY.into(),
+        pcr_recording::number(setup.period_s),
+    ));
     meta.push(("plant_seed".into(), setup.plant.seed.to_string()));
     meta.push(("commands".into(), program.commands.len().to_string()));
     if let Some(l) = setup.capture_latency_s {

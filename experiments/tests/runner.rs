@@ -85,6 +85,8 @@ fn a_calibration_run_on_the_ideal_plant_gives_one_settled_group_per_visit() {
     assert_eq!(rec.metadata[0].0, "experiment");
     assert_eq!(rec.meta("experiment"), Some("calibration"));
     assert_eq!(rec.meta("seed"), Some("9"));
+    // The timing contract: each row's command is executed over the next cycle.
+    assert_eq!(rec.command_delay_s().unwrap(), 0.02);
     // one row per 20 ms cycle
     for w in rec.rows.windows(2) {
         assert!((w[1].t_s - w[0].t_s - 0.02).abs() < 1e-9);

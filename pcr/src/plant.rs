@@ -427,6 +427,15 @@ fn run_series(
         ),
     ];
     meta.push(("setpoints".to_string(), input.display().to_string()));
+    // The timing contract: a row's pose is measured before its command is sent, so it answers
+    // the command of the row before (one setpoint spacing earlier).
+    meta.push((
+        pcr_recording::COMMAND_DELAY_KEY.to_string(),
+        pcr_recording::number(median_spacing(
+            setpoints.iter().map(|s| s.0),
+            cfg.simulation.cycle_s,
+        )),
+    ));
     meta.push(("created".to_string(), utc_now()));
     let mut known = vec![
         "x_mm", "y_mm", "phi_deg", "m1x_mm", "m1y_mm", "m2x_mm", "m2y_mm", "m3x_mm", "m3y_mm",
@@ -683,6 +692,18 @@ fn draw_state(
     }
     root.present()?;
     Ok(())
+}
+
+/// The median spacing of the setpoints' times, s (`fallback` for fewer than two).
+fn median_spacing(times: impl Iterator<Item = f64>, fallback: f64) -> f64 {
+    let t: Vec<f64> = times.collect();
+    let mut d: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+    if d.is_empty() {
+        return fallback;
+    }
+    d.sort_by(f64::total_cmp);
+    // To the nanosecond: differences of row times carry rounding (0.06 - 0.04).
+    (d[d.len() / 2] * 1e9).round() / 1e9
 }
 
 #[cfg(test)]

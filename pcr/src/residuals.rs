@@ -160,6 +160,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let wall = std::time::Instant::now();
     let res = attribute(&robot, &drawing, &series, &blocks, &opts)?;
     eprintln!("analysed in {:.2} s", wall.elapsed().as_secs_f64());
+    for t in &res.timing {
+        println!("timing: {}", t.message);
+    }
     println!(
         "held out: {} rows in {} blocks; before: position mean {:.3} / max {:.3} / RMS {:.3} mm, orientation RMS {:.3} deg",
         res.rows[1], res.blocks[1], res.before.position_mean_mm, res.before.position_max_mm,
@@ -190,6 +193,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         res.after.orientation_rms_deg,
         res.verdict
     );
+    if let Some(f) = &res.timing_finding {
+        println!("verdict: {f}");
+    }
     for f in &res.correlated_features {
         println!(
             "  remaining residual follows {} (held-out R^2 {:.2}, correlation {:+.2} with {})",

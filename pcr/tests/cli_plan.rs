@@ -111,6 +111,14 @@ fn a_plan_runs_on_the_ideal_plant_and_lands_on_the_planned_poses() {
         rec.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // The timing contract: a row's pose is measured before its command is sent (one 20 ms
+    // setpoint spacing).
+    let text = std::fs::read_to_string(&rec).unwrap();
+    assert!(
+        text.contains("# command_delay_s = 0.02\n"),
+        "{}",
+        &text[..400]
+    );
     let mut r = csv::ReaderBuilder::new()
         .comment(Some(b'#'))
         .from_path(&rec)

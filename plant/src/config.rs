@@ -149,6 +149,18 @@ pub struct Creep {
     pub time_constant_s: f64,
 }
 
+/// Steady tendon drift: each tendon lengthens at a constant rate with the plant's time (a
+/// slipping clamp, a slow relaxation, a thermal expansion of the roll), without limit, unlike
+/// creep.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Drift {
+    /// Switch.
+    pub enabled: bool,
+    /// Elongation rate per leg, mm/s (positive: the tendon lengthens).
+    pub rate_mm_per_s: [f64; 3],
+}
+
 /// Coulomb friction (elastic-perfectly-plastic Jenkins elements: stick stiffness and slip limit).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -238,6 +250,9 @@ pub struct PlantConfig {
     pub stepper: Stepper,
     /// Tendon creep.
     pub creep: Creep,
+    /// Steady tendon drift (off when absent).
+    #[serde(default)]
+    pub drift: Drift,
     /// Friction.
     pub friction: Friction,
     /// Motion capture.
@@ -291,6 +306,7 @@ impl PlantConfig {
                 compliance_mm_per_n: 0.0,
                 time_constant_s: 30.0,
             },
+            drift: Drift::default(),
             friction: Friction {
                 joints: false,
                 joint_torque_n_mm: 0.0,
@@ -531,6 +547,7 @@ impl PlantConfig {
             "must be in [0, 1]",
         )?;
         check3("stepper.backlash_steps", &s.backlash_steps, 0.0, 200.0)?;
+        check3("drift.rate_mm_per_s", &self.drift.rate_mm_per_s, -1.0, 1.0)?;
         let c = &self.creep;
         check(
             "creep.compliance_mm_per_n",

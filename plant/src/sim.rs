@@ -491,6 +491,20 @@ impl Plant {
         self.settle_substep(t, dt)
     }
 
+    /// The tendons' elongation at `t`: creep plus the steady drift grown since the plant's
+    /// start, mm.
+    fn elongation(&self, t: f64) -> [f64; 3] {
+        let d = &self.cfg.drift;
+        std::array::from_fn(|i| {
+            self.creep[i]
+                + if d.enabled {
+                    d.rate_mm_per_s[i] * t.max(0.0)
+                } else {
+                    0.0
+                }
+        })
+    }
+
     /// The statics, creep and friction at `t` with the actuators as they are.
     fn settle_substep(&mut self, t: f64, dt: f64) -> Result<(), StaticsError> {
         let output: [f64; 3] = std::array::from_fn(|i| self.act[i].output);
@@ -503,7 +517,8 @@ impl Plant {
                 self.creep[i] += (target - self.creep[i]) * w;
             }
         }
-        let bending = self.truth.robot.bending_of_steps(&output, &self.creep);
+        let elongation = self.elongation(t);
+        let bending = self.truth.robot.bending_of_steps(&output, &elongation);
         let loads = Loads {
             phi_b: bending,
             wrench: self.truth.wrench,
@@ -562,7 +577,7 @@ impl Plant {
             output,
             creep_mm: self.creep,
             tendon_mm: std::array::from_fn(|i| {
-                output[i] * self.truth.robot.mm_per_step[i] - self.creep[i]
+                output[i] * self.truth.robot.mm_per_step[i] - elongation[i]
             }),
             bending,
             eq,

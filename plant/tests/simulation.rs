@@ -240,6 +240,32 @@ fn creep_drifts_with_its_time_constant() {
 }
 
 #[test]
+fn drift_lengthens_a_tendon_steadily_with_time_and_moves_the_platform() {
+    let rate = 0.01;
+    let mut plant = ideal_with(|c| {
+        c.drift.enabled = true;
+        c.drift.rate_mm_per_s = [0.0, rate, 0.0];
+    });
+    let home = plant.home_steps();
+    plant.write(0.0, CYCLE, &cmd(home)).unwrap();
+    plant.idle_until(1.0).unwrap();
+    let s1 = plant.true_state().clone();
+    plant.idle_until(21.0).unwrap();
+    let s2 = plant.true_state().clone();
+    // The commanded outputs do not move; the tendon of leg 2 is longer by rate * 20 s, linearly
+    // (no saturation), and the others are unchanged.
+    assert_eq!(s1.output, s2.output);
+    let d: Vec<f64> = (0..3).map(|i| s1.tendon_mm[i] - s2.tendon_mm[i]).collect();
+    assert!((d[1] - rate * 20.0).abs() < 1e-9, "{d:?}");
+    assert!(d[0].abs() < 1e-12 && d[2].abs() < 1e-12, "{d:?}");
+    let moved = (s2.eq.pose[0] - s1.eq.pose[0]).hypot(s2.eq.pose[1] - s1.eq.pose[1]);
+    assert!(
+        moved > 0.05,
+        "0.2 mm of tendon moves the platform: {moved} mm"
+    );
+}
+
+#[test]
 fn friction_makes_the_error_depend_on_the_approach_direction() {
     let run = |friction: bool| {
         let mut plant = ideal_with(|c| {

@@ -60,6 +60,20 @@ pub enum RecordingError {
         /// What is wrong.
         message: String,
     },
+    /// A metadata line whose value is not what its key requires (e.g. `command_delay_s`).
+    #[error("{origin}: line {line}: metadata `{key}`: {message} (value {value:?})")]
+    Metadata {
+        /// The file.
+        origin: String,
+        /// 1-based line in the file (0 for a recording built in memory).
+        line: u64,
+        /// The key.
+        key: String,
+        /// The value text.
+        value: String,
+        /// What is wrong.
+        message: String,
+    },
     /// A value that cannot be written (NaN, infinite, time not increasing).
     #[error("cannot write row {row}: {message}")]
     Write {
@@ -68,6 +82,28 @@ pub enum RecordingError {
         /// What is wrong.
         message: String,
     },
+}
+
+/// The metadata key of the timing contract (`shared/spec/recording.md`, "Timing"): the pose
+/// measured at time t answers the command of row time t - D, seconds. Absent: D = 0.
+pub const COMMAND_DELAY_KEY: &str = "command_delay_s";
+
+/// Parses the value of `command_delay_s`: a finite number of seconds, not negative.
+pub fn parse_command_delay(value: &str) -> Result<f64, String> {
+    let d: f64 = value
+        .trim()
+        .parse()
+        .map_err(|_| "not a number of seconds".to_string())?;
+    if !d.is_finite() {
+        return Err("must be finite".into());
+    }
+    if d < 0.0 {
+        return Err("must not be negative (a measurement cannot answer a later command)".into());
+    }
+    if d > 60.0 {
+        return Err("more than 60 s: not a drive's execution delay".into());
+    }
+    Ok(d)
 }
 
 /// Every column the format defines, in the recommended order.
@@ -162,6 +198,26 @@ impl Recording {
             .map(|(_, v)| v.as_str())
     }
 
+    /// The declared command-to-measurement delay D of the timing contract, s: the pose measured
+    /// at t answers the command of row time t - D. 0 when the file does not declare it.
+    pub fn command_delay_s(&self) -> Result<f64, RecordingError> {
+        match self.meta(COMMAND_DELAY_KEY) {
+            None => Ok(0.0),
+            Some(v) => parse_command_delay(v).map_err(|message| RecordingError::Metadata {
+                origin: String::new(),
+                line: 0,
+                key: COMMAND_DELAY_KEY.into(),
+                value: v.into(),
+                message,
+            }),
+        }
+    }
+
+    /// Whether the file declares its command delay (`# command_delay_s = D`).
+    pub fn declares_command_delay(&self) -> bool {
+        self.meta(COMMAND_DELAY_KEY).is_some()
+    }
+
     /// Index of an unknown column.
     pub fn extra_index(&self, name: &str) -> Option<usize> {
         self.extra_columns.iter().position(|c| c == name)
@@ -202,9 +258,21 @@ impl Recording {
             let l = l.strip_prefix('\u{feff}').unwrap_or(l);
             if let Some(c) = l.strip_prefix('#') {
                 match c.split_once('=') {
-                    Some((k, v)) if !k.trim().is_empty() && !k.trim().contains(' ') => rec
-                        .metadata
-                        .push((k.trim().to_string(), v.trim().to_string())),
+                    Some((k, v)) if !k.trim().is_empty() && !k.trim().contains(' ') => {
+                        let (k, v) = (k.trim(), v.trim());
+                        if k == COMMAND_DELAY_KEY {
+                            if let Err(message) = parse_command_delay(v) {
+                                return Err(RecordingError::Metadata {
+                                    origin: origin.into(),
+                                    line: line_no,
+                                    key: k.into(),
+                                    value: v.into(),
+                                    message,
+                                });
+                            }
+                        }
+                        rec.metadata.push((k.to_string(), v.to_string()))
+                    }
                     _ => rec
                         .comments
                         .push(c.strip_prefix(' ').unwrap_or(c).to_string()),

@@ -204,3 +204,31 @@ fn text_extra_cells_are_written_and_read_back() {
     assert_eq!(rec.rows[1].extra, [None, Some("2".to_string())]);
     assert_eq!(rec.rows.len(), 2);
 }
+
+#[test]
+fn the_timing_contract_defaults_to_zero_and_reads_the_declared_delay() {
+    let plain = read("t_s,q1,q2,q3\n0,1,2,3\n").unwrap();
+    assert_eq!(plain.command_delay_s().unwrap(), 0.0);
+    assert!(!plain.declares_command_delay());
+    let chain = read("# command_delay_s = 0.02\nt_s,q1,q2,q3\n0,1,2,3\n").unwrap();
+    assert_eq!(chain.command_delay_s().unwrap(), 0.02);
+    assert!(chain.declares_command_delay());
+}
+
+#[test]
+fn a_bad_command_delay_is_an_error_naming_the_line_and_key() {
+    for bad in ["abc", "-0.02", "inf", "NaN"] {
+        let text =
+            format!("# source = other lab\n# command_delay_s = {bad}\nt_s,q1,q2,q3\n0,1,2,3\n");
+        let e = read(&text).unwrap_err();
+        let msg = e.to_string();
+        assert!(
+            matches!(e, RecordingError::Metadata { line: 2, .. }),
+            "{bad}: {msg}"
+        );
+        assert!(
+            msg.contains("test.csv: line 2") && msg.contains("command_delay_s"),
+            "{msg}"
+        );
+    }
+}

@@ -109,6 +109,12 @@ pub enum Verdict {
 /// The result.
 #[derive(Debug, Clone, Serialize)]
 pub struct Attribution {
+    /// The command delay of every recording: declared, shown by the data, used
+    /// ([`crate::alignment`]).
+    pub timing: Vec<crate::alignment::Timing>,
+    /// A timing declaration error, if a recording declares a longer delay than its data show
+    /// (part of the verdict: the analysis went on with the data's delay).
+    pub timing_finding: Option<String>,
     /// Held-out errors of the starting model.
     pub before: Errors,
     /// Held-out errors of the extended model.
@@ -312,6 +318,11 @@ fn current_params(c: &RobotConfig, name: &str, fitted: &[Estimate]) -> Vec<Estim
                 .collect();
             v.push(p("time constant", cr.time_constant_s, "s"));
             v
+        }),
+        "drift" => e.drift.as_ref().map(|d| {
+            (0..3)
+                .map(|i| p(&format!("rate leg {}", i + 1), d.rate_mm_per_s[i], "mm/s"))
+                .collect()
         }),
         "joint_springs" => e.compliance.as_ref().map(|k| {
             vec![
@@ -557,6 +568,11 @@ pub fn residual_table(
 /// Runs the attribution: starting from `start` (the calibrated robot; `drawing` is the robot
 /// file the analysis began with, whose geometry a plausible explanation stays near), on `series`
 /// with `blocks`.
+///
+/// Before anything is attributed, every recording's command delay is estimated from its moving
+/// rows and set against what it declares ([`crate::alignment`]); a recording whose data answer
+/// their commands sooner than declared is analysed with the delay the data show, and the
+/// finding is part of the result.
 pub fn attribute(
     start: &RobotConfig,
     drawing: &RobotConfig,
@@ -565,8 +581,33 @@ pub fn attribute(
     opts: &Options,
 ) -> Result<Attribution, AttributionError> {
     let w_phi = start.legs.iter().map(|l| l.r_p_mm).sum::<f64>() / 3.0;
+    let model = ExtendedModel::new(start)?;
+    let ctx0 = Context::new(series, model.clone(), blocks, w_phi);
+    let timing = crate::alignment::align(&ctx0);
+    let finding = crate::alignment::declaration_errors(&timing);
+    let mut a = match crate::alignment::realigned(series, &timing) {
+        None => attribute_from(ctx0, start, drawing, series, blocks, opts)?,
+        Some(aligned) => {
+            let ctx = Context::new(&aligned, model, blocks, w_phi);
+            attribute_from(ctx, start, drawing, &aligned, blocks, opts)?
+        }
+    };
+    a.timing = timing;
+    a.timing_finding = finding;
+    Ok(a)
+}
+
+/// The attribution from the starting model's residuals `ctx0` on series whose delays are set.
+fn attribute_from<'a>(
+    ctx0: Context<'a>,
+    start: &RobotConfig,
+    drawing: &RobotConfig,
+    series: &'a [Series],
+    blocks: &Blocks,
+    opts: &Options,
+) -> Result<Attribution, AttributionError> {
+    let w_phi = ctx0.w_phi;
     let mut config = start.clone();
-    let ctx0 = Context::new(series, ExtendedModel::new(&config)?, blocks, w_phi);
     let (train0, test0) = (ctx0.train(), ctx0.test());
     if train0.len() < 20 || test0.is_empty() {
         return Err(AttributionError::Data(format!(
@@ -788,6 +829,8 @@ pub fn attribute(
         (false, true) => Verdict::Unexplained,
     };
     Ok(Attribution {
+        timing: Vec::new(),
+        timing_finding: None,
         before,
         after,
         effects: added,

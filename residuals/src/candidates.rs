@@ -14,6 +14,7 @@
 //! | `backlash` | gear backlash / friction hysteresis: play on each motor | play b_i, steps |
 //! | `latency` | command-to-motion latency | tau, s |
 //! | `creep` | slow drift: tendon creep, first-order in time | gain_i, time constant T s |
+//! | `drift` | steady drift: each tendon lengthens at a constant rate | rate_i mm/s |
 //! | `joint_springs` | compliance under the coupling forces: springs in the passive joints bend the segments (kineto-static) | k_M, k_P N mm/rad |
 //! | `external_load` | compliance under an external load: a constant wrench on the platform | F_x, F_y N, M N mm |
 //! | `frame` | capture-frame misregistration | dx, dy mm, dphi deg |
@@ -25,7 +26,7 @@ use crate::context::Context;
 use crate::linear::{self, motor_delta, Columns, Nuisance};
 use pcr_kinematics::statics::Loads;
 use pcr_kinematics::TendonMap;
-use pcr_robot::effects::{Backlash, Compliance, Creep, FrameCorrection, Latency, Periodic};
+use pcr_robot::effects::{Backlash, Compliance, Creep, Drift, FrameCorrection, Latency, Periodic};
 use pcr_robot::{RobotConfig, TendonMapKind, TendonMapSpec};
 use serde::Serialize;
 
@@ -78,13 +79,14 @@ pub struct Fitted {
 }
 
 /// The names of the candidates, in the order they are tried.
-pub const NAMES: [&str; 9] = [
+pub const NAMES: [&str; 10] = [
     "geometry",
     "tendon_map",
     "frame",
     "latency",
     "backlash",
     "creep",
+    "drift",
     "joint_springs",
     "external_load",
     "periodic",
@@ -96,6 +98,7 @@ pub fn describe(name: &str) -> &'static str {
         "backlash" => "gear backlash / friction hysteresis: the output follows each motor through a play",
         "latency" => "command-to-motion latency: the motion lags the command",
         "creep" => "slow drift: tendon creep, elongation toward a share of the displacement with a time constant",
+        "drift" => "steady drift: each tendon lengthens at a constant rate with the time since the start of the recording",
         "joint_springs" => "compliance under the coupling forces: springs in the passive joints bend the segments (kineto-static)",
         "external_load" => "compliance under an external load: a constant wrench on the platform bends the segments (kineto-static)",
         "frame" => "capture-frame misregistration: a rigid transform between the measured and the robot frame",
@@ -529,6 +532,66 @@ pub fn creep(ctx: &Context, train: &[usize]) -> Option<Fitted> {
     })
 }
 
+/// `drift`: each tendon lengthens at a constant rate with the time since the start of its
+/// recording (linear in the three rates, fitted with the nuisance). Where creep saturates with a
+/// time constant, drift keeps growing; the held-out blocks choose between them.
+pub fn drift(ctx: &Context, train: &[usize]) -> Option<Fitted> {
+    let mmps: [f64; 3] = std::array::from_fn(|i| ctx.model.config.legs[i].actuation.mm_per_step());
+    let nui = ctx.nuisance().nui.clone();
+    // Rates in mm per 1000 s for conditioning.
+    const UNIT: f64 = 1e-3;
+    let t0: Vec<f64> = ctx
+        .series
+        .iter()
+        .map(|s| s.samples.first().map_or(0.0, |x| x.t_s))
+        .collect();
+    let effect = |i: usize, c: &mut Columns| {
+        let row = &ctx.rows[i];
+        let age = ctx.series[row.s].samples[row.k].t_s - t0[row.s];
+        for m in 0..3 {
+            // A longer tendon is a shorter effective displacement: motor output lower by
+            // rate * age / (mm/step).
+            let mut dq = [0.0; 3];
+            dq[m] = -UNIT * age / mmps[m];
+            c[m] = motor_delta(ctx, i, dq);
+        }
+    };
+    let (fit, delta, alone) = fit_joint(ctx, &nui, train, 3, &effect, None)?;
+    let prev = ctx
+        .model
+        .config
+        .effects
+        .drift
+        .as_ref()
+        .map_or([0.0; 3], |d| d.rate_mm_per_s);
+    let rate: [f64; 3] = std::array::from_fn(|m| prev[m] + UNIT * fit.x[m]);
+    let params = (0..3)
+        .map(|m| {
+            est(
+                &format!("rate leg {}", m + 1),
+                rate[m],
+                Some(UNIT * fit.std[m]),
+                "mm/s",
+            )
+        })
+        .collect();
+    let nuis = nuisance_change(nui, fit.x.clone(), 3);
+    Some(Fitted {
+        name: "drift",
+        params,
+        k: 3,
+        delta,
+        alone,
+        train_sse: fit.sse,
+        change: Box::new(move |c| {
+            c.effects.drift = Some(Drift {
+                rate_mm_per_s: rate,
+            });
+            nuis(c);
+        }),
+    })
+}
+
 /// The kineto-static candidates: `which` selects the load parameters freed (indices into
 /// force x, force y, couple, k_M, k_P). EI comes from the robot file or [`DEFAULT_EI`].
 fn loaded(ctx: &Context, train: &[usize], name: &'static str, which: &[usize]) -> Option<Fitted> {
@@ -868,6 +931,7 @@ pub fn fit(name: &str, ctx: &Context, train: &[usize]) -> Option<Fitted> {
         "latency" => latency(ctx, train),
         "backlash" => backlash(ctx, train),
         "creep" => creep(ctx, train),
+        "drift" => drift(ctx, train),
         "joint_springs" => joint_springs(ctx, train),
         "external_load" => external_load(ctx, train),
         "periodic" => periodic(ctx, train),

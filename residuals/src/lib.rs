@@ -6,6 +6,7 @@
 //! Like the calibration, this crate reads recordings and robot files only: it knows nothing of
 //! the simulated plant whose effects its tests try to find.
 
+pub mod alignment;
 pub mod attribution;
 pub mod candidates;
 pub mod context;

@@ -2,12 +2,15 @@
 //! declares, predicting the measured pose of every row of a recording.
 //!
 //! The chain of a prediction, in the order the physics runs:
-//! 1. the drive's segment and the latency: the motors are where the command was one control
-//!    period (the drive executes a setpoint over the following cycle) plus `latency_s` earlier;
+//! 1. the timing contract and the latency: the motors are where the command was the recording's
+//!    command delay (`Series::delay_s`: what the file declares, `shared/spec/recording.md`
+//!    "Timing"; a chain whose drive executes a setpoint over the following cycle declares one
+//!    period) plus `latency_s` earlier;
 //! 2. periodic transmission errors: the output lags the motor by `A sin(2 pi q / P + phase)`;
 //! 3. backlash: the output follows the motor through a play of `b` steps;
 //! 4. creep: the tendon lengthens by `e`, `de/dt = (gain dl - e) / T`, so the segment sees
 //!    `dl - e`;
+//!    drift: the tendon lengthens by `rate * (t - t0)` (t0 the recording's first row);
 //! 5. the tendon map gives the curvatures and the (loaded, with `[effects.compliance]`) forward
 //!    kinematics the pose;
 //! 6. frame correction: the measurement is corrected by the declared rigid transform before it
@@ -17,7 +20,7 @@ use crate::series::Series;
 use nalgebra::Matrix3;
 use pcr_kinematics::statics::Loads;
 use pcr_kinematics::{Pose, Robot};
-use pcr_robot::effects::{Backlash, Creep, Effects, Latency, Periodic};
+use pcr_robot::effects::{Backlash, Creep, Drift, Effects, Latency, Periodic};
 use pcr_robot::RobotConfig;
 
 /// The prediction for one row.
@@ -88,10 +91,13 @@ impl ExtendedModel {
             .iter()
             .map(|q| std::array::from_fn(|i| q[i] * mmps[i]))
             .collect();
-        let dl_eff = match &e.creep {
+        let mut dl_eff = match &e.creep {
             Some(c) => apply_creep(s, &dl, c),
             None => dl,
         };
+        if let Some(d) = &e.drift {
+            apply_drift(s, &mut dl_eff, d);
+        }
         let mut out = Vec::with_capacity(s.samples.len());
         let mut guess = s
             .samples
@@ -198,7 +204,7 @@ pub fn steps_before_backlash(
     latency: Option<&Latency>,
     periodic: &[Periodic],
 ) -> Vec<[f64; 3]> {
-    let mut q = delayed_steps(s, s.period_s + latency.map_or(0.0, |l| l.latency_s));
+    let mut q = delayed_steps(s, s.delay_s + latency.map_or(0.0, |l| l.latency_s));
     for p in periodic {
         let i = (p.motor as usize).clamp(1, 3) - 1;
         let ph = p.phase_deg.to_radians();
@@ -256,6 +262,16 @@ pub fn apply_creep(s: &Series, dl: &[[f64; 3]], c: &Creep) -> Vec<[f64; 3]> {
         .collect()
 }
 
+/// Tendon drift: the effective displacement shortened by `rate * (t - t0)`, in place.
+pub fn apply_drift(s: &Series, dl: &mut [[f64; 3]], d: &Drift) {
+    let t0 = s.samples.first().map_or(0.0, |x| x.t_s);
+    for (v, x) in dl.iter_mut().zip(&s.samples) {
+        for i in 0..3 {
+            v[i] -= d.rate_mm_per_s[i] * (x.t_s - t0);
+        }
+    }
+}
+
 /// The configuration a fraction `s` of the way from `old` to `new`: every continuous parameter
 /// (leg geometry, map coefficients of the same family, effect parameters; an effect absent from
 /// `old` counts as zero) interpolated; structural differences (another map family, other
@@ -303,6 +319,10 @@ pub fn blend(old: &RobotConfig, new: &RobotConfig, s: f64) -> RobotConfig {
         if let Some(oc) = &eo.creep {
             c.time_constant_s = lerp(oc.time_constant_s, c.time_constant_s);
         }
+    }
+    if let Some(d) = e.drift.as_mut() {
+        let o = eo.drift.as_ref().map_or([0.0; 3], |x| x.rate_mm_per_s);
+        d.rate_mm_per_s = std::array::from_fn(|i| lerp(o[i], d.rate_mm_per_s[i]));
     }
     if let Some(c) = e.compliance.as_mut() {
         let z = Default::default();

@@ -77,6 +77,22 @@ fn slots(e: &Effects) -> Vec<Slot> {
             hi: 5000f64.ln(),
         });
     }
+    if e.drift.is_some() {
+        for i in 0..3 {
+            v.push(Slot {
+                // mm per 1000 s, so that the solver's steps are of the order of the others.
+                get: |e, i| e.drift.as_ref().map_or(0.0, |d| 1e3 * d.rate_mm_per_s[i]),
+                set: |e, i, x| {
+                    if let Some(d) = e.drift.as_mut() {
+                        d.rate_mm_per_s[i] = 1e-3 * x
+                    }
+                },
+                index: i,
+                lo: -1e3,
+                hi: 1e3,
+            });
+        }
+    }
     if let Some(c) = &e.compliance {
         let active = [
             c.force_n[0] != 0.0 || c.force_n[1] != 0.0 || c.couple_n_mm != 0.0,

@@ -2,7 +2,7 @@
 //! evidence, every candidate's score, the verdict, and the residual plots behind each decision.
 
 use crate::attribution::{Attribution, Verdict};
-use pcr_calibration::figures::{curve_panels, CurvePanel, FigureError};
+use pcr_calibration::figures::{curve_panels, curve_panels_shared, CurvePanel, FigureError};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -49,6 +49,7 @@ pub fn write_report(dir: &Path, a: &Attribution, inputs: &str) -> Result<PathBuf
             n[0], n[1], n[2]
         );
     }
+    write_timing(&mut md, a);
     let _ = writeln!(
         md,
         "\n## Before and after (held-out rows)\n\n| | position mean (mm) | position max (mm) | position RMS (mm) | orientation RMS (deg) |\n|---|---|---|---|---|"
@@ -62,7 +63,7 @@ pub fn write_report(dir: &Path, a: &Attribution, inputs: &str) -> Result<PathBuf
     }
     let _ = writeln!(
         md,
-        "\n**Verdict: {}**. Remaining held-out RMS of the weighted residual {:.3} mm, {:.3} mm above \
+        "\n**Verdict: {}{}**. Remaining held-out RMS of the weighted residual {:.3} mm, {:.3} mm above \
          what the capture noise explains.\n\n![residual over time](residual_time.svg)\n\n\
          (Each mark is the largest residual of a short run of consecutive held-out rows.)",
         match a.verdict {
@@ -70,9 +71,17 @@ pub fn write_report(dir: &Path, a: &Attribution, inputs: &str) -> Result<PathBuf
             Verdict::PartlyExplained => "partly explained",
             Verdict::Unexplained => "unexplained",
         },
+        if a.timing_finding.is_some() {
+            ", with a timing declaration error (see Timing)"
+        } else {
+            ""
+        },
         a.remaining_rms_mm,
         a.remaining_excess_mm
     );
+    if let Some(f) = &a.timing_finding {
+        let _ = writeln!(md, "\n**{f}**");
+    }
     if !a.correlated_features.is_empty() {
         let _ = writeln!(
             md,
@@ -155,7 +164,8 @@ pub fn write_report(dir: &Path, a: &Attribution, inputs: &str) -> Result<PathBuf
             .map(|p| (p.0, p.2))
             .collect::<Vec<_>>(),
     );
-    curve_panels(
+    // One scale for both panels, so that the gain shows.
+    curve_panels_shared(
         &dir.join("residual_time.svg"),
         "Position residual of held-out rows over time",
         &[
@@ -219,4 +229,45 @@ fn chunk_max(pts: &[(f64, f64)]) -> Vec<(f64, f64)> {
 fn every_kth(pts: &[(f64, f64)]) -> Vec<(f64, f64)> {
     let k = pts.len().div_ceil(MAX_MARKS).max(1);
     pts.iter().step_by(k).copied().collect()
+}
+
+/// The timing section: each recording's declared command delay against the one its moving rows
+/// show (`crate::alignment`).
+fn write_timing(md: &mut String, a: &Attribution) {
+    if a.timing.is_empty() {
+        return;
+    }
+    let _ = writeln!(
+        md,
+        "\n## Timing: command delay declared and shown by the data\n\n\
+         The pose of a row answers the command of D seconds earlier (`# command_delay_s = D`, 0 \
+         when the file says nothing). The delay the data show is estimated from the moving \
+         training rows (profile of the residual over the delay, block-jackknife standard error).\n\n\
+         | recording | declared D (s) | data (s) | +- (s) | data - D (s) | moving rows | finding | delay used (s) |\n\
+         |---|---|---|---|---|---|---|---|"
+    );
+    let opt = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.4}"));
+    for t in &a.timing {
+        let _ = writeln!(
+            md,
+            "| `{}` | {}{} | {} | {} | {} | {} | {} | {:.4} |",
+            t.origin,
+            t.declared_s,
+            if t.declared { "" } else { " (not declared)" },
+            opt(t.estimated_s),
+            opt(t.std_s),
+            opt(t.excess_s),
+            t.moving_rows,
+            match t.finding {
+                crate::alignment::TimingFinding::Consistent => "consistent",
+                crate::alignment::TimingFinding::LaterThanDeclared => "later than declared",
+                crate::alignment::TimingFinding::DeclarationError => "**declaration error**",
+                crate::alignment::TimingFinding::NotEstimable => "not estimable",
+            },
+            t.delay_used_s
+        );
+    }
+    for t in &a.timing {
+        let _ = writeln!(md, "\n{}", t.message);
+    }
 }

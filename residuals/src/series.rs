@@ -31,14 +31,31 @@ pub struct Series {
     /// Pooled within-visit standard deviation of x, y (mm) and phi (rad) of the settled rows:
     /// the capture noise of one row.
     pub row_noise: Option<[f64; 3]>,
-    /// The control period (median spacing of the rows), s: the drive reaches a commanded
-    /// setpoint one period after it was commanded (it executes it as one segment).
+    /// The control period (median spacing of the rows), s.
     pub period_s: f64,
+    /// The command delay the file declares (`# command_delay_s = D`, 0 when absent), s: the
+    /// pose measured at t answers the command of row time t - D (`shared/spec/recording.md`,
+    /// "Timing").
+    pub declared_delay_s: f64,
+    /// Whether the file declares it.
+    pub delay_declared: bool,
+    /// The delay the base model uses, s: the declared one, unless the alignment found the data
+    /// answer their commands sooner than declared (a timing declaration error), in which case
+    /// the delay the data show.
+    pub delay_s: f64,
 }
 
 /// Why a recording cannot be analysed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SeriesError {
+    /// The timing declaration cannot be read.
+    #[error("{origin}: {message}")]
+    Timing {
+        /// The file.
+        origin: String,
+        /// What is wrong.
+        message: String,
+    },
     /// No row has a measured pose.
     #[error("{origin}: no row has a measured platform pose (columns x_mm, y_mm, phi_deg): there is no residual to analyse")]
     NoPose {
@@ -50,6 +67,10 @@ pub enum SeriesError {
 impl Series {
     /// Reads a recording.
     pub fn from_recording(rec: &Recording, origin: &str) -> Result<Series, SeriesError> {
+        let declared_delay_s = rec.command_delay_s().map_err(|e| SeriesError::Timing {
+            origin: origin.into(),
+            message: e.to_string(),
+        })?;
         let samples: Vec<Sample> = rec
             .rows
             .iter()
@@ -98,6 +119,9 @@ impl Series {
             samples,
             row_noise,
             period_s,
+            declared_delay_s,
+            delay_declared: rec.declares_command_delay(),
+            delay_s: declared_delay_s,
         })
     }
 

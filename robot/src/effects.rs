@@ -42,6 +42,17 @@ pub struct Creep {
     pub time_constant_s: f64,
 }
 
+/// Steady drift of the tendon length: each tendon lengthens at a constant rate with the time
+/// since the start of the recording (or of the run), so the segment sees `dl - rate * t`. Where
+/// creep saturates, drift keeps growing: a slipping clamp, a tendon that relaxes over hours, a
+/// thermal expansion of the roll. The IK adds the predicted elongation to the command.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Drift {
+    /// Rate of elongation per leg, mm/s (positive: the tendon lengthens).
+    pub rate_mm_per_s: [f64; 3],
+}
+
 /// Compliance: a kineto-static extension of the constant-curvature model (segments that bend
 /// under the link forces, with their total bending fixed by the tendons), loaded by an external
 /// wrench on the platform and by springs in the passive joints relaxed at the home pose.
@@ -118,6 +129,9 @@ pub struct Effects {
     /// Tendon creep.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub creep: Option<Creep>,
+    /// Steady drift of the tendon length.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub drift: Option<Drift>,
     /// Kineto-static compliance.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub compliance: Option<Compliance>,
@@ -170,6 +184,19 @@ impl Effects {
             }
             if let Some(v) = c.gain.iter().find(|v| !(v.is_finite() && v.abs() < 1.0)) {
                 return bad("creep.gain", v.to_string(), "must be within (-1, 1)");
+            }
+        }
+        if let Some(d) = &self.drift {
+            if let Some(v) = d
+                .rate_mm_per_s
+                .iter()
+                .find(|v| !(v.is_finite() && v.abs() <= 1.0))
+            {
+                return bad(
+                    "drift.rate_mm_per_s",
+                    v.to_string(),
+                    "must be within +-1 mm/s",
+                );
             }
         }
         if let Some(c) = &self.compliance {

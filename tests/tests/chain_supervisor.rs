@@ -246,6 +246,9 @@ fn run_paper_prints_the_summary_and_exits_zero() {
          phip_deg"
     );
     assert!(csv.lines().count() > 500);
+    // The timing contract: the driver executes each row's command over the next 20 ms cycle.
+    let r = pcr_recording::Recording::read(csv.as_bytes(), "run").unwrap();
+    assert_eq!(r.command_delay_s().unwrap(), 0.02);
     assert!(chain.leftovers().is_empty(), "{:?}", chain.leftovers());
     assert_eq!(chain.processes_left(), 0);
 }

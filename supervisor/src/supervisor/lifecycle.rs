@@ -267,11 +267,14 @@ impl Supervisor {
             .duration_since(std::time::UNIX_EPOCH)
             .map_or(0, |d| d.as_secs());
         let source = self.recording_source();
+        // The timing contract: the driver executes a row's command over the next cycle.
+        let command_delay = pcr_recording::number(self.cfg.period_ms * 1e-3);
         let mut meta: Vec<(String, String)> = vec![
             ("robot".into(), self.robot_path.display().to_string()),
             ("source".into(), source),
             ("created".into(), stamp.to_string()),
             ("program".into(), name.into()),
+            (pcr_recording::COMMAND_DELAY_KEY.into(), command_delay),
         ];
         let (experiment, extra_meta) = match experiment {
             Some((x, m)) => (Some(x), m),
