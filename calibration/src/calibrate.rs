@@ -5,10 +5,13 @@
 //!    with the lowest test RMS of M_i over the three legs is selected (one function for all legs,
 //!    as in the paper), unless one is forced.
 //! 3. Step 2 with the selected legs fixed ([`crate::step2`]).
-//! 4. The calibrated robot is checked (finite, valid, has its home pose) and compared with the
-//!    starting robot on the training and the test poses.
+//! 4. With [`Method::Joint`] (the default), every parameter of both steps refined together on
+//!    the M_i and the platform poses ([`crate::joint`]); [`Method::Paper`] stops after step 2.
+//! 5. The calibrated robot is checked (finite, valid, has its home pose) and compared with the
+//!    starting robot on the training and the test poses, beside the paper's two-step robot.
 
 use crate::data::{DataError, SplitSource, StaticData};
+use crate::joint::{self, JointFit, JointObservations, JointParams};
 use crate::step1::{self, FreeGeometry, LegFit, LegObservation, Step1Error};
 use crate::step2::{self, PoseErrors, PoseObservation, Step2Error, Step2Fit, Step2Params};
 use pcr_kinematics::Robot;
@@ -41,11 +44,25 @@ impl ParameterSet {
     }
 }
 
+/// How the calibrated parameters are fitted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Method {
+    /// The paper's two steps, then every parameter of both refined jointly on the M_i and the
+    /// platform poses ([`crate::joint`]).
+    #[default]
+    Joint,
+    /// The paper's two steps alone (step 1: each leg on its M_i; step 2: the platform joints).
+    Paper,
+}
+
 /// Settings of a calibration.
 #[derive(Debug, Clone, Serialize)]
 pub struct Options {
     /// Which parameters are freed.
     pub parameters: ParameterSet,
+    /// The paper's two steps alone, or followed by the joint refinement.
+    pub method: Method,
     /// Use this Table I function instead of selecting by test RMS.
     pub function: Option<TendonMapKind>,
     /// Weight of one degree of orientation error in step 2, mm (None: r_p pi / 180).
@@ -60,6 +77,7 @@ impl Default for Options {
     fn default() -> Self {
         Options {
             parameters: ParameterSet::Paper,
+            method: Method::Joint,
             function: None,
             phi_weight_mm_per_deg: None,
             seed: 1,
@@ -183,15 +201,33 @@ pub struct Calibration {
     pub step1: Vec<LegFit>,
     /// Step 2.
     pub step2: Step2Fit,
+    /// The paper's two steps (the robot of step 2) on the data.
+    pub paper: SplitAccuracy,
+    /// The joint refinement (absent with [`Method::Paper`] or when it failed: see `warnings`).
+    pub joint: Option<JointResult>,
+    /// Which result is the calibrated robot.
+    pub used: Method,
     /// The starting robot on the data.
     pub before: SplitAccuracy,
-    /// The calibrated robot on the data.
+    /// The calibrated robot on the data (the joint result's, or the paper's two steps').
     pub after: SplitAccuracy,
     /// Things the user should know (correlated parameters, parameters on bounds, ...).
     pub warnings: Vec<String>,
+    /// The robot of the paper's two steps.
+    #[serde(skip)]
+    pub paper_robot: RobotConfig,
     /// The calibrated robot configuration.
     #[serde(skip)]
     pub robot: RobotConfig,
+}
+
+/// The joint refinement with the refined robot's accuracy.
+#[derive(Debug, Clone, Serialize)]
+pub struct JointResult {
+    /// The fit: parameters with their joint uncertainties.
+    pub fit: JointFit,
+    /// The refined robot on the data.
+    pub accuracy: SplitAccuracy,
 }
 
 /// Observations of leg `i` in one split.
@@ -287,19 +323,93 @@ pub fn calibrate(
 }
 
 /// [`calibrate`] on static poses already read.
+///
+/// The outline: check the data, fit Table I (step 1 for every function and leg), select the
+/// function, fit the platform (step 2), then, with [`Method::Joint`], refine every parameter
+/// jointly ([`crate::joint`]); compare every model on the training and the test poses.
 pub fn calibrate_data(
     start: &RobotConfig,
     data: &StaticData,
     opts: &Options,
 ) -> Result<Calibration, CalibError> {
+    check_enough_data(data)?;
     let origin = data.origin.clone();
     let mut warnings = Vec::new();
-    // Enough measured joints and poses?
+    let obs: LegSets = std::array::from_fn(|i| {
+        (
+            leg_observations(start, data, i, Split::Train),
+            leg_observations(start, data, i, Split::Test),
+        )
+    });
+    let table1 = table_one(start, &obs, opts.parameters.step1());
+    let has_test = obs.iter().all(|o| !o.1.is_empty());
+    let (selected, selected_by) =
+        select_function(&table1, opts.function, has_test, &origin, &mut warnings)?;
+    let step1_fits = table1[selected - 1].legs.clone();
+    let legs_robot = apply_step1(start, &step1_fits, &mut warnings);
+    let w = opts
+        .phi_weight_mm_per_deg
+        .unwrap_or_else(|| step2::default_phi_weight(start));
+    let train_poses = pose_observations(data, Split::Train);
+    let s2 = run_step2(&legs_robot, opts.parameters, &train_poses, w, &origin)?;
+    if !s2.converged {
+        warnings.push(format!("step 2 stopped before converging ({})", s2.status));
+    }
+    note_params(&mut warnings, "platform", &s2.params);
+    let mut paper_robot = s2.config.clone();
+    paper_robot.name = format!("{}, calibrated from {}", start.name, data.origin);
+    check_usable(&paper_robot, &origin)?;
+    let paper = split_accuracy(&paper_robot, data);
+    let joint = match opts.method {
+        Method::Paper => None,
+        Method::Joint => {
+            let free = JointParams {
+                legs: opts.parameters.step1(),
+                platform: opts.parameters.step2(),
+                kind: step1_fits[0].kind,
+            };
+            let train: [Vec<LegObservation>; 3] = std::array::from_fn(|i| obs[i].0.clone());
+            let joint_obs = JointObservations {
+                legs: &train,
+                poses: &train_poses,
+            };
+            refine_jointly(start, &paper_robot, free, joint_obs, w, data, &mut warnings)
+        }
+    };
+    let used = joint_usable(joint.as_ref(), start, &origin, &obs, &mut warnings);
+    let (robot, after) = match (used, &joint) {
+        (Method::Joint, Some(j)) => (j.fit.config.clone(), j.accuracy),
+        _ => (paper_robot.clone(), paper),
+    };
+    compare_with_paper(joint.as_ref(), &paper, &mut warnings);
+    Ok(Calibration {
+        data: summary(data),
+        options: opts.clone(),
+        table1,
+        selected,
+        selected_by,
+        step1: step1_fits,
+        step2: s2,
+        paper,
+        joint,
+        used,
+        before: split_accuracy(start, data),
+        after,
+        warnings,
+        paper_robot,
+        robot,
+    })
+}
+
+/// Training and test observations of the three legs.
+type LegSets = [(Vec<LegObservation>, Vec<LegObservation>); 3];
+
+/// Every leg needs a measured M_i, and the platform a measured pose, in the training set.
+fn check_enough_data(data: &StaticData) -> Result<(), CalibError> {
     for i in 0..3 {
-        let have = data.count_m(Split::Train, i);
-        if have == 0 {
+        if data.count_m(Split::Train, i) == 0 {
             return Err(DataError::Missing {
-                origin: origin.clone(),
+                origin: data.origin.clone(),
                 what: format!("a measured passive joint M{} in the training set", i + 1),
                 columns: format!("m{0}x_mm, m{0}y_mm", i + 1),
             }
@@ -308,141 +418,177 @@ pub fn calibrate_data(
     }
     if data.count_pose(Split::Train) == 0 {
         return Err(DataError::Missing {
-            origin: origin.clone(),
+            origin: data.origin.clone(),
             what: "a measured platform pose in the training set".into(),
             columns: "x_mm, y_mm, phi_deg".into(),
         }
         .into());
     }
-    let obs: [(Vec<LegObservation>, Vec<LegObservation>); 3] = std::array::from_fn(|i| {
-        (
-            leg_observations(start, data, i, Split::Train),
-            leg_observations(start, data, i, Split::Test),
-        )
-    });
-    let free = opts.parameters.step1();
-    let kinds: Vec<TendonMapKind> = TendonMapKind::ALL.to_vec();
-    let mut table1 = Vec::with_capacity(kinds.len());
-    for kind in kinds {
-        let mut legs = Vec::with_capacity(3);
-        let mut error = None;
-        for i in 0..3 {
-            match step1::fit_leg(
-                &format!("leg {}", i + 1),
-                Some(i),
-                &start.legs[i],
-                free,
-                kind,
-                &obs[i].0,
-                &obs[i].1,
-            ) {
-                Ok(f) => legs.push(f),
-                Err(e) => {
-                    error = Some(e.to_string());
-                    break;
-                }
+    Ok(())
+}
+
+fn summary(data: &StaticData) -> DataSummary {
+    DataSummary {
+        file: data.origin.clone(),
+        poses: data.poses.len(),
+        train: data.of(Split::Train).count(),
+        test: data.of(Split::Test).count(),
+        split: data.split.clone(),
+        row_noise: data.row_noise,
+    }
+}
+
+/// Table I: step 1 of every function on the three legs.
+fn table_one(start: &RobotConfig, obs: &LegSets, free: FreeGeometry) -> Vec<TableRow> {
+    TendonMapKind::ALL
+        .iter()
+        .map(|&kind| table_row(start, obs, free, kind))
+        .collect()
+}
+
+/// Step 1 of one function on the three legs (stops at the first leg that fails).
+fn table_row(
+    start: &RobotConfig,
+    obs: &LegSets,
+    free: FreeGeometry,
+    kind: TendonMapKind,
+) -> TableRow {
+    let mut legs = Vec::with_capacity(3);
+    let mut error = None;
+    for i in 0..3 {
+        let what = format!("leg {}", i + 1);
+        let (train, test) = &obs[i];
+        match step1::fit_leg(&what, Some(i), &start.legs[i], free, kind, train, test) {
+            Ok(f) => legs.push(f),
+            Err(e) => {
+                error = Some(e.to_string());
+                break;
             }
         }
-        let complete = error.is_none();
-        table1.push(TableRow {
-            index: kind.table_index(),
-            name: kind.name(),
-            form: kind.paper_form(),
-            extended_form: kind.extended_form(),
-            train_rms_mm: complete.then(|| pooled(&legs, false)).flatten(),
-            test_rms_mm: complete.then(|| pooled(&legs, true)).flatten(),
-            converged: complete && legs.iter().all(|f| f.converged),
-            monotonic: complete
-                && legs.iter().all(|f| {
-                    f.monotonic
-                        && crate::step1::reaches_bending_limit(
-                            &pcr_kinematics::TendonMap::from_spec(&f.config.tendon_map),
-                            f.config.l_c_mm,
-                            start.limits.bending_max_deg,
-                        )
-                }),
-            legs,
-            error,
+    }
+    let complete = error.is_none();
+    TableRow {
+        index: kind.table_index(),
+        name: kind.name(),
+        form: kind.paper_form(),
+        extended_form: kind.extended_form(),
+        train_rms_mm: complete.then(|| pooled(&legs, false)).flatten(),
+        test_rms_mm: complete.then(|| pooled(&legs, true)).flatten(),
+        converged: complete && legs.iter().all(|f| f.converged),
+        monotonic: complete
+            && legs
+                .iter()
+                .all(|f| f.monotonic && map_reaches_limit(&f.config, start.limits.bending_max_deg)),
+        legs,
+        error,
+    }
+}
+
+/// Whether a leg's map can be inverted up to the bending limit.
+fn map_reaches_limit(leg: &pcr_robot::LegConfig, bending_max_deg: f64) -> bool {
+    step1::reaches_bending_limit(
+        &pcr_kinematics::TendonMap::from_spec(&leg.tendon_map),
+        leg.l_c_mm,
+        bending_max_deg,
+    )
+}
+
+/// The function to use: forced, or the selectable one with the lowest test RMS of M_i (the
+/// lowest AIC on the training poses without test poses).
+fn select_function(
+    table1: &[TableRow],
+    forced: Option<TendonMapKind>,
+    has_test: bool,
+    origin: &str,
+    warnings: &mut Vec<String>,
+) -> Result<(usize, String), CalibError> {
+    if let Some(k) = forced {
+        return check_forced(&table1[k.table_index() - 1], origin)
+            .map(|()| (k.table_index(), "forced by the user".to_string()));
+    }
+    let usable = || {
+        table1
+            .iter()
+            .filter(|r| r.error.is_none() && r.converged && r.monotonic)
+    };
+    let best = if has_test {
+        usable()
+            .filter_map(|r| Some((r.index, r.test_rms_mm?)))
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map(|(i, v)| (i, format!("lowest test RMS of M_i ({v:.3} mm)")))
+    } else {
+        warnings.push(
+            "no test poses: the function was selected by the Akaike information \
+             criterion on the training poses, not by held-out error"
+                .into(),
+        );
+        usable()
+            .map(|r| (r.index, aic(r)))
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map(|(i, v)| (i, format!("lowest AIC on the training poses ({v:.1})")))
+    };
+    best.ok_or_else(|| CalibError::NoFunction {
+        origin: origin.to_string(),
+        reasons: no_function_reasons(table1),
+    })
+}
+
+/// A forced function must have been fitted, and have converged, on every leg.
+fn check_forced(row: &TableRow, origin: &str) -> Result<(), CalibError> {
+    if let Some(e) = &row.error {
+        return Err(CalibError::NoFunction {
+            origin: origin.to_string(),
+            reasons: format!("  {e}"),
         });
     }
-    // Selection.
-    let has_test = (0..3).all(|i| !obs[i].1.is_empty());
-    let (selected, selected_by) = match opts.function {
-        Some(k) => {
-            let row = &table1[k.table_index() - 1];
-            if let Some(e) = &row.error {
-                return Err(CalibError::NoFunction {
-                    origin,
-                    reasons: format!("  {e}"),
-                });
-            }
-            if let Some(f) = row.legs.iter().find(|f| !f.converged) {
-                return Err(CalibError::NoFunction {
-                    origin,
-                    reasons: format!(
-                        "  leg {}: function {} ({}): the fit did not converge ({} after {} evaluations)",
-                        f.leg.map_or(0, |i| i + 1),
-                        row.index,
-                        row.name,
-                        f.status,
-                        f.evaluations
-                    ),
-                });
-            }
-            (k.table_index(), "forced by the user".to_string())
-        }
-        None => {
-            let usable = table1
-                .iter()
-                .filter(|r| r.error.is_none() && r.converged && r.monotonic);
-            let best = if has_test {
-                usable
-                    .filter_map(|r| Some((r.index, r.test_rms_mm?)))
-                    .min_by(|a, b| a.1.total_cmp(&b.1))
-                    .map(|(i, v)| (i, format!("lowest test RMS of M_i ({v:.3} mm)")))
-            } else {
-                warnings.push(
-                    "no test poses: the function was selected by the Akaike information \
-                     criterion on the training poses, not by held-out error"
-                        .into(),
-                );
-                usable
-                    .map(|r| {
-                        let n: usize = r.legs.iter().map(|f| 2 * f.n_train).sum();
-                        let k: usize = r.legs.iter().map(|f| f.params.len()).sum();
-                        let rss = r.train_rms_mm.unwrap_or(f64::INFINITY).powi(2) * n as f64 / 2.0;
-                        let aic = n as f64 * (rss / n as f64).ln() + 2.0 * k as f64;
-                        (r.index, aic)
-                    })
-                    .min_by(|a, b| a.1.total_cmp(&b.1))
-                    .map(|(i, v)| (i, format!("lowest AIC on the training poses ({v:.1})")))
-            };
-            match best {
-                Some(b) => b,
-                None => {
-                    let reasons = table1
-                        .iter()
-                        .map(|r| match &r.error {
-                            Some(e) => format!("  {e}"),
-                            None if !r.converged => format!(
-                                "  function {} ({}): the fit did not converge",
-                                r.index, r.name
-                            ),
-                            None => format!(
-                                "  function {} ({}): the fitted map turns back inside the data's range or cannot be inverted up to the bending limit",
-                                r.index, r.name
-                            ),
-                        })
-                        .collect::<Vec<_>>()
-                        .join("\n");
-                    return Err(CalibError::NoFunction { origin, reasons });
-                }
-            }
-        }
-    };
-    let step1_fits = table1[selected - 1].legs.clone();
+    if let Some(f) = row.legs.iter().find(|f| !f.converged) {
+        return Err(CalibError::NoFunction {
+            origin: origin.to_string(),
+            reasons: format!(
+                "  leg {}: function {} ({}): the fit did not converge ({} after {} evaluations)",
+                f.leg.map_or(0, |i| i + 1),
+                row.index,
+                row.name,
+                f.status,
+                f.evaluations
+            ),
+        });
+    }
+    Ok(())
+}
+
+/// Akaike information criterion of a Table I row on its training points (two coordinates per
+/// point, Gaussian errors).
+fn aic(r: &TableRow) -> f64 {
+    let n: usize = r.legs.iter().map(|f| 2 * f.n_train).sum();
+    let k: usize = r.legs.iter().map(|f| f.params.len()).sum();
+    let rss = r.train_rms_mm.unwrap_or(f64::INFINITY).powi(2) * n as f64 / 2.0;
+    n as f64 * (rss / n as f64).ln() + 2.0 * k as f64
+}
+
+/// One line per function saying why it cannot be used.
+fn no_function_reasons(table1: &[TableRow]) -> String {
+    table1
+        .iter()
+        .map(|r| match &r.error {
+            Some(e) => format!("  {e}"),
+            None if !r.converged => format!(
+                "  function {} ({}): the fit did not converge",
+                r.index, r.name
+            ),
+            None => format!(
+                "  function {} ({}): the fitted map turns back inside the data's range or cannot be inverted up to the bending limit",
+                r.index, r.name
+            ),
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+/// The starting robot with the legs of step 1, noting what the user should know.
+fn apply_step1(start: &RobotConfig, fits: &[LegFit], warnings: &mut Vec<String>) -> RobotConfig {
     let mut robot = start.clone();
-    for f in &step1_fits {
+    for f in fits {
         let i = f.leg.unwrap_or(0);
         robot.legs[i] = f.config.clone();
         if !f.converged {
@@ -452,61 +598,136 @@ pub fn calibrate_data(
                 f.status
             ));
         }
-        note_params(
-            &mut warnings,
-            &format!("leg {}", i + 1),
-            &f.params,
-            &f.correlated,
-        );
+        note_params(warnings, &format!("leg {}", i + 1), &f.params);
     }
-    // Step 2.
-    let w = opts
-        .phi_weight_mm_per_deg
-        .unwrap_or_else(|| step2::default_phi_weight(start));
-    let train_poses = pose_observations(data, Split::Train);
-    let s2 = step2::fit_platform(&robot, opts.parameters.step2(), &train_poses, w).map_err(
-        |source| CalibError::Step2 {
-            origin: origin.clone(),
+    robot
+}
+
+/// Step 2 on the robot with the step-1 legs.
+fn run_step2(
+    legs_robot: &RobotConfig,
+    parameters: ParameterSet,
+    train_poses: &[PoseObservation],
+    w: f64,
+    origin: &str,
+) -> Result<Step2Fit, CalibError> {
+    step2::fit_platform(legs_robot, parameters.step2(), train_poses, w).map_err(|source| {
+        CalibError::Step2 {
+            origin: origin.to_string(),
             source,
-        },
-    )?;
-    if !s2.converged {
-        warnings.push(format!("step 2 stopped before converging ({})", s2.status));
-    }
-    note_params(&mut warnings, "platform", &s2.params, &s2.correlated);
-    let mut robot = s2.config.clone();
-    robot.name = format!("{}, calibrated from {}", start.name, data.origin);
-    check_usable(&robot, &origin)?;
-    let before = split_accuracy(start, data);
-    let after = split_accuracy(&robot, data);
-    Ok(Calibration {
-        data: DataSummary {
-            file: data.origin.clone(),
-            poses: data.poses.len(),
-            train: data.of(Split::Train).count(),
-            test: data.of(Split::Test).count(),
-            split: data.split.clone(),
-            row_noise: data.row_noise,
-        },
-        options: opts.clone(),
-        table1,
-        selected,
-        selected_by,
-        step1: step1_fits,
-        step2: s2,
-        before,
-        after,
-        warnings,
-        robot,
+        }
     })
 }
 
-fn note_params(
+/// The joint refinement and its accuracy; `None` (with a warning) when it fails, so that the
+/// paper's result stands.
+fn refine_jointly(
+    start: &RobotConfig,
+    paper_robot: &RobotConfig,
+    free: JointParams,
+    train: JointObservations<'_>,
+    w: f64,
+    data: &StaticData,
     warnings: &mut Vec<String>,
-    what: &str,
-    params: &[step1::Param],
-    correlated: &[step1::Correlated],
+) -> Option<JointResult> {
+    match joint::refine(start, paper_robot, free, train, w) {
+        Ok(mut fit) => {
+            fit.config.name = paper_robot.name.clone();
+            if !fit.converged {
+                warnings.push(format!(
+                    "joint refinement stopped before converging ({})",
+                    fit.status
+                ));
+            }
+            note_params(warnings, "joint fit", &fit.params);
+            let accuracy = split_accuracy(&fit.config, data);
+            Some(JointResult { fit, accuracy })
+        }
+        Err(e) => {
+            warnings.push(format!("{e}: the paper's two steps are used"));
+            None
+        }
+    }
+}
+
+/// Which result becomes the calibrated robot: the joint one when it exists, is usable and its
+/// maps can be inverted over the data and up to the bending limit; else the paper's (with a
+/// warning saying why).
+fn joint_usable(
+    joint: Option<&JointResult>,
+    start: &RobotConfig,
+    origin: &str,
+    obs: &LegSets,
+    warnings: &mut Vec<String>,
+) -> Method {
+    let Some(j) = joint else {
+        return Method::Paper;
+    };
+    let reason = check_usable(&j.fit.config, origin)
+        .err()
+        .map(|e| e.to_string())
+        .or_else(|| maps_not_invertible(&j.fit.config, start, obs));
+    match reason {
+        Some(r) => {
+            warnings.push(format!(
+                "the joint refinement is not used ({r}): the paper's two steps are"
+            ));
+            Method::Paper
+        }
+        None => Method::Joint,
+    }
+}
+
+/// Why a robot's maps cannot serve the IK over the data's displacements (10 % margin) and up
+/// to the bending limit (`None` when they can).
+fn maps_not_invertible(robot: &RobotConfig, start: &RobotConfig, obs: &LegSets) -> Option<String> {
+    robot.legs.iter().enumerate().find_map(|(i, leg)| {
+        let (lo, hi) = obs[i]
+            .0
+            .iter()
+            .chain(&obs[i].1)
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |a, o| {
+                (a.0.min(o.dl_mm), a.1.max(o.dl_mm))
+            });
+        let map = pcr_kinematics::TendonMap::from_spec(&leg.tendon_map);
+        let ok = step1::is_monotonic(&map, lo, hi)
+            && map_reaches_limit(leg, start.limits.bending_max_deg);
+        (!ok).then(|| {
+            format!(
+                "leg {}: the refined map turns back inside the data's range or cannot be inverted up to the bending limit",
+                i + 1
+            )
+        })
+    })
+}
+
+/// Held-out platform position RMS of the joint refinement above this multiple of the two steps'
+/// gets a warning: smaller differences are within the sampling error of a test set of tens of
+/// poses (docs/calibration.md).
+const JOINT_WORSE_WARNING: f64 = 1.05;
+
+/// A warning when the joint refinement predicts the held-out platform positions clearly worse
+/// than the paper's two steps (it fits the training poses at least as well by construction).
+fn compare_with_paper(
+    joint: Option<&JointResult>,
+    paper: &SplitAccuracy,
+    warnings: &mut Vec<String>,
 ) {
+    let (Some(j), Some(p)) = (joint.and_then(|j| j.accuracy.test), paper.test) else {
+        return;
+    };
+    if j.pose.position_rms_mm > JOINT_WORSE_WARNING * p.pose.position_rms_mm {
+        warnings.push(format!(
+            "the joint refinement predicts the test poses worse than the paper's two steps \
+             (platform position RMS {:.4} against {:.4} mm): compare with --method paper",
+            j.pose.position_rms_mm, p.pose.position_rms_mm
+        ));
+    }
+}
+
+/// Warns of the parameters that end on a bound. The strongly correlated pairs are not repeated
+/// as warnings: `report::correlated_summary` names them all in one line, the report lists each.
+fn note_params(warnings: &mut Vec<String>, what: &str, params: &[step1::Param]) {
     for p in params {
         if p.at_bound {
             warnings.push(format!(
@@ -514,12 +735,6 @@ fn note_params(
                 p.name, p.value, p.unit
             ));
         }
-    }
-    for c in correlated {
-        warnings.push(format!(
-            "{what}: {} and {} are strongly correlated (rho = {:+.3}): the data hardly separate them",
-            c.a, c.b, c.rho
-        ));
     }
 }
 
@@ -559,8 +774,9 @@ pub fn robot_file(cal: &Calibration, created: &str) -> String {
         "# Calibrated robot written by `pcr calibrate` ({created}).\n\
          # Data: {} ({} static poses: {} train, {} test).\n\
          # Tendon map: Table I function {} ({}), {}.\n\
-         # Parameters freed: {:?}. Test RMS of M_i {} mm; platform position RMS on the test set {} mm\n\
-         # (before: {} mm). Use it as `robot = \"<this file>\"` in a supervisor configuration.\n",
+         # Parameters freed: {:?}; {}. Test RMS of M_i {} mm; platform position RMS on the\n\
+         # test set {} mm (before: {} mm; the paper's two steps: {} mm).\n\
+         # Use it as `robot = \"<this file>\"` in a supervisor configuration.\n",
         cal.data.file,
         cal.data.poses,
         cal.data.train,
@@ -569,9 +785,14 @@ pub fn robot_file(cal: &Calibration, created: &str) -> String {
         best.name,
         cal.selected_by,
         cal.options.parameters,
-        fmt_opt(best.test_rms_mm),
+        match cal.used {
+            Method::Joint => "the paper's two steps refined jointly",
+            Method::Paper => "the paper's two steps",
+        },
+        fmt_opt(cal.after.test.map(|a| a.m_rms_mm)),
         fmt_opt(cal.after.test.map(|a| a.pose.position_rms_mm)),
         fmt_opt(cal.before.test.map(|a| a.pose.position_rms_mm)),
+        fmt_opt(cal.paper.test.map(|a| a.pose.position_rms_mm)),
     );
     s.push_str(&cal.robot.to_toml_string());
     s

@@ -187,13 +187,45 @@ pub struct CurvePanel {
     pub curves: Vec<Curve>,
 }
 
-/// Panels of curves with data points (e.g. curvature over tendon displacement per leg).
+/// Everything a panel draws: its points and its curves.
+fn panel_points(p: &CurvePanel) -> impl Iterator<Item = (f64, f64)> + '_ {
+    p.points
+        .iter()
+        .copied()
+        .chain(p.curves.iter().flat_map(|c| c.2.iter().copied()))
+}
+
+/// Panels of curves with data points (e.g. curvature over tendon displacement per leg), each
+/// panel on its own scales.
 pub fn curve_panels(
     file: &Path,
     title: &str,
     panels: &[CurvePanel],
     x_desc: &str,
     y_desc: &str,
+) -> Result<(), FigureError> {
+    draw_curve_panels(file, title, panels, x_desc, y_desc, false)
+}
+
+/// Panels of curves with data points on one pair of scales, so that the panels compare at a
+/// glance (e.g. a residual before and after a correction).
+pub fn curve_panels_shared(
+    file: &Path,
+    title: &str,
+    panels: &[CurvePanel],
+    x_desc: &str,
+    y_desc: &str,
+) -> Result<(), FigureError> {
+    draw_curve_panels(file, title, panels, x_desc, y_desc, true)
+}
+
+fn draw_curve_panels(
+    file: &Path,
+    title: &str,
+    panels: &[CurvePanel],
+    x_desc: &str,
+    y_desc: &str,
+    shared: bool,
 ) -> Result<(), FigureError> {
     pcr_figures::init();
     let e = ferr(file);
@@ -202,14 +234,13 @@ pub fn curve_panels(
     root.fill(&WHITE).map_err(&e)?;
     let root = root.titled(title, (FONT_FAMILY, 18)).map_err(&e)?;
     let areas = root.split_evenly((1, panels.len().max(1)));
+    let common = bounds(panels.iter().flat_map(panel_points), 0.05);
     for (area, p) in areas.iter().zip(panels) {
-        let (xr, yr) = bounds(
-            p.points
-                .iter()
-                .copied()
-                .chain(p.curves.iter().flat_map(|c| c.2.iter().copied())),
-            0.05,
-        );
+        let (xr, yr) = if shared {
+            common
+        } else {
+            bounds(panel_points(p), 0.05)
+        };
         let mut c = ChartBuilder::on(area)
             .caption(&p.title, (FONT_FAMILY, 15))
             .margin(10)
@@ -256,6 +287,44 @@ pub fn curve_panels(
     Ok(())
 }
 
+/// The labelled and the grid-only ticks of a log axis over `lo..hi` (`0 < lo < hi`): 1, 2 and 5
+/// times the powers of ten (only the powers of ten when that gives more than eight labels, and
+/// every integer multiple when 1-2-5 gives fewer than three), and the integer multiples for the
+/// grid.
+pub fn log_ticks(lo: f64, hi: f64) -> (Vec<f64>, Vec<f64>) {
+    if !(lo > 0.0 && hi > lo && hi.is_finite()) {
+        return (Vec::new(), Vec::new());
+    }
+    let decades = lo.log10().floor() as i32..=hi.log10().ceil() as i32;
+    // m x 10^e parsed from its decimal form: 0.2, not 0.20000000000000004.
+    let within = |mantissas: &[u32]| -> Vec<f64> {
+        decades
+            .clone()
+            .flat_map(|e| mantissas.iter().map(move |m| format!("{m}e{e}")))
+            .filter_map(|t| t.parse::<f64>().ok())
+            .filter(|v| *v >= lo * (1.0 - 1e-12) && *v <= hi * (1.0 + 1e-12))
+            .collect()
+    };
+    let all: Vec<u32> = (1..=9).collect();
+    let mut major = within(&[1, 2, 5]);
+    if major.len() > 8 {
+        major = within(&[1]);
+    } else if major.len() < 3 {
+        major = within(&all);
+    }
+    (major, within(&all))
+}
+
+/// A tick label of a log axis: the value with as many decimals as its first significant digit
+/// needs ("0.05", "0.2", "3", "20").
+pub fn tick_label(v: f64) -> String {
+    if !(v.is_finite() && v > 0.0) {
+        return format!("{v}");
+    }
+    let decimals = (-(v.log10() + 1e-9).floor()).max(0.0) as usize;
+    format!("{v:.decimals$}")
+}
+
 /// Horizontal comparison bars: one row per label, several values per row (log scale).
 pub fn bars(
     file: &Path,
@@ -274,22 +343,33 @@ pub fn bars(
         .flat_map(|s| s.2.iter().flatten().copied())
         .filter(|v| *v > 0.0);
     let (lo, hi) = vals.fold((f64::INFINITY, 0.0f64), |a, v| (a.0.min(v), a.1.max(v)));
+    // Room on the right of the longest bar for the legend (about a fifth of the axis).
     let (lo, hi) = if lo.is_finite() {
-        (lo / 2.0, hi * 2.0)
+        let lo = lo / 2.0;
+        (lo, hi * (hi / lo).powf(0.3).max(2.0))
     } else {
         (0.01, 10.0)
     };
     let n = labels.len();
+    let (major, minor) = log_ticks(lo, hi);
     let mut c = ChartBuilder::on(&root)
         .caption(title, (FONT_FAMILY, 16))
         .margin(12)
         .x_label_area_size(35)
         .y_label_area_size(150)
-        .build_cartesian_2d((lo..hi).log_scale(), 0.0..n as f64)
+        .build_cartesian_2d(
+            (lo..hi)
+                .log_scale()
+                .with_key_points(major)
+                .with_light_points(minor),
+            0.0..n as f64,
+        )
         .map_err(&e)?;
     let labels_owned: Vec<String> = labels.to_vec();
     c.configure_mesh()
         .x_desc(x_desc)
+        .x_label_formatter(&|v: &f64| tick_label(*v))
+        .y_max_light_lines(0)
         .y_labels(n * 2 + 1)
         .y_label_formatter(&move |y: &f64| {
             let k = (y - 0.5).round();
@@ -325,4 +405,126 @@ pub fn bars(
         .map_err(&e)?;
     root.present().map_err(&e)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The text elements of an SVG: (x, y, text).
+    fn texts(svg: &str) -> Vec<(f64, f64, String)> {
+        let attr = |tag: &str, name: &str| -> f64 {
+            let key = format!(" {name}=\"");
+            tag.find(&key)
+                .and_then(|i| {
+                    let v = &tag[i + key.len()..];
+                    v[..v.find('"')?].parse().ok()
+                })
+                .unwrap_or(f64::NAN)
+        };
+        svg.split("<text")
+            .skip(1)
+            .filter_map(|t| {
+                let (tag, rest) = t.split_once('>')?;
+                let text = rest.split_once("</text>")?.0;
+                Some((attr(tag, "x"), attr(tag, "y"), text.trim().to_string()))
+            })
+            .collect()
+    }
+
+    fn temp_svg(name: &str) -> std::path::PathBuf {
+        std::env::temp_dir().join(format!("pcr-figures-{name}-{}.svg", std::process::id()))
+    }
+
+    #[test]
+    fn log_ticks_are_one_two_five_with_short_labels() {
+        let (major, minor) = log_ticks(0.115, 5.8);
+        assert_eq!(major, [0.2, 0.5, 1.0, 2.0, 5.0]);
+        assert_eq!(minor.len(), 8 + 5, "{minor:?}");
+        let labels: Vec<String> = major.iter().map(|v| tick_label(*v)).collect();
+        assert_eq!(labels, ["0.2", "0.5", "1", "2", "5"]);
+        assert_eq!(tick_label(0.05), "0.05");
+        assert_eq!(tick_label(3e-3), "0.003");
+        assert_eq!(tick_label(20.0), "20");
+        // Six decades: powers of ten only; a narrow range: every integer multiple.
+        assert_eq!(
+            log_ticks(0.01, 9000.0).0,
+            [0.01, 0.1, 1.0, 10.0, 100.0, 1000.0]
+        );
+        assert_eq!(log_ticks(0.25, 0.7).0, [0.3, 0.4, 0.5, 0.6, 0.7]);
+        assert!(log_ticks(0.0, 1.0).0.is_empty() && log_ticks(2.0, 1.0).0.is_empty());
+    }
+
+    #[test]
+    fn bars_label_their_log_axis_with_separate_numbers() {
+        let file = temp_svg("bars");
+        let labels = vec!["check poses RMS (mm)".to_string(), "circle RMS (mm)".into()];
+        let series = vec![
+            (
+                "nominal",
+                RGBColor(150, 150, 150),
+                vec![Some(2.9), Some(2.85)],
+            ),
+            (
+                "calibrated",
+                RGBColor(31, 119, 180),
+                vec![Some(0.23), Some(1.01)],
+            ),
+            ("extended", RGBColor(214, 39, 40), vec![Some(0.3), None]),
+        ];
+        bars(&file, "Error on the robot", &labels, &series, "mm").unwrap();
+        let svg = std::fs::read_to_string(&file).unwrap();
+        let _ = std::fs::remove_file(&file);
+        // The x axis labels: below the plot, numbers.
+        let axis: Vec<(f64, String)> = texts(&svg)
+            .into_iter()
+            .filter(|(_, _, t)| t.parse::<f64>().is_ok())
+            .map(|(x, _, t)| (x, t))
+            .collect();
+        let values: Vec<&str> = axis.iter().map(|a| a.1.as_str()).collect();
+        assert_eq!(values, ["0.2", "0.5", "1", "2", "5"], "{axis:?}");
+        for w in axis.windows(2) {
+            // At least the width of the labels apart (12 px font: under 8 px a character).
+            let gap = w[1].0 - w[0].0;
+            assert!(gap > 8.0 * (w[0].1.len() + w[1].1.len()) as f64, "{axis:?}");
+        }
+    }
+
+    #[test]
+    fn shared_panels_have_one_scale() {
+        let file = temp_svg("shared");
+        let panel = |title: &str, top: f64| CurvePanel {
+            title: title.into(),
+            points: (0..50)
+                .map(|k| (k as f64, top * (k % 7) as f64 / 6.0))
+                .collect(),
+            curves: vec![],
+        };
+        let panels = [panel("before", 3.0), panel("after", 0.4)];
+        let axis_labels = |file: &Path| {
+            let svg = std::fs::read_to_string(file).unwrap();
+            // y labels: numbers right-aligned left of each panel (at 60 px into the panel).
+            let mut sides = (Vec::new(), Vec::new());
+            for (x, _, t) in texts(&svg) {
+                if t.parse::<f64>().is_ok() && x % 420.0 <= 70.0 {
+                    if x < 420.0 {
+                        sides.0.push(t)
+                    } else {
+                        sides.1.push(t)
+                    }
+                }
+            }
+            sides
+        };
+        curve_panels_shared(&file, "residual", &panels, "t (s)", "mm").unwrap();
+        let (a, b) = axis_labels(&file);
+        assert!(a.len() >= 3, "{a:?}");
+        assert_eq!(a, b);
+        assert!(a.iter().any(|t| t.parse::<f64>().unwrap() >= 2.0), "{a:?}");
+        // Each panel on its own scale otherwise.
+        curve_panels(&file, "residual", &panels, "t (s)", "mm").unwrap();
+        let (a, b) = axis_labels(&file);
+        let _ = std::fs::remove_file(&file);
+        assert_ne!(a, b);
+    }
 }

@@ -5,7 +5,9 @@
 //! nothing of the simulated plant, so that it is never tested against its own assumptions.
 
 pub mod data;
+pub mod joint;
 pub mod lsq;
+pub mod params;
 pub mod step1;
 pub mod step2;
 

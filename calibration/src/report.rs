@@ -34,6 +34,81 @@ pub enum ReportError {
     Figure(#[from] FigureError),
 }
 
+/// A strongly correlated pair of parameters of one fit of a calibration.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CorrelatedPair {
+    /// The fit: `leg 1` .. `leg 3` (step 1) or `platform` (step 2).
+    pub fit: String,
+    /// First parameter.
+    pub a: String,
+    /// Second parameter.
+    pub b: String,
+    /// Their correlation coefficient.
+    pub rho: f64,
+}
+
+/// The strongly correlated parameter pairs of a calibration (|rho| above
+/// [`crate::step1::CORRELATION_WARNING`]), step 1 per leg, step 2, then the joint refinement.
+pub fn correlated_pairs(cal: &Calibration) -> Vec<CorrelatedPair> {
+    let legs = cal.step1.iter().enumerate().map(|(k, f)| {
+        (
+            format!("leg {}", f.leg.unwrap_or(k) + 1),
+            f.correlated.as_slice(),
+        )
+    });
+    legs.chain(std::iter::once((
+        "platform".to_string(),
+        cal.step2.correlated.as_slice(),
+    )))
+    .chain(
+        cal.joint
+            .iter()
+            .map(|j| ("joint fit".to_string(), j.fit.correlated.as_slice())),
+    )
+    .flat_map(|(fit, pairs)| {
+        pairs.iter().map(move |c| CorrelatedPair {
+            fit: fit.clone(),
+            a: c.a.clone(),
+            b: c.b.clone(),
+            rho: c.rho,
+        })
+    })
+    .collect()
+}
+
+/// The calibration's warnings: parameters on their bounds, a fit that did not converge ...
+/// (the correlated pairs are not among them: [`correlated_pairs`] lists those).
+pub fn other_warnings(cal: &Calibration) -> Vec<&str> {
+    cal.warnings.iter().map(String::as_str).collect()
+}
+
+/// One line naming the strongly correlated pairs, grouped by fit, e.g. `leg 1: a/b, c/d;
+/// platform: e/f` (`None` when there are none).
+pub fn correlated_summary(cal: &Calibration) -> Option<String> {
+    let pairs = correlated_pairs(cal);
+    if pairs.is_empty() {
+        return None;
+    }
+    let mut groups: Vec<(String, Vec<String>)> = Vec::new();
+    for p in &pairs {
+        let pair = format!("{}/{}", p.a, p.b);
+        match groups.iter_mut().find(|g| g.0 == p.fit) {
+            Some(g) => g.1.push(pair),
+            None => groups.push((p.fit.clone(), vec![pair])),
+        }
+    }
+    let text: Vec<String> = groups
+        .iter()
+        .map(|(fit, v)| format!("{fit}: {}", v.join(", ")))
+        .collect();
+    Some(format!(
+        "{} strongly correlated parameter pairs (|rho| > {}; the data hardly separate them): {}",
+        pairs.len(),
+        crate::step1::CORRELATION_WARNING,
+        text.join("; ")
+    ))
+}
+
 /// Formats an optional number.
 pub fn opt(v: Option<f64>, digits: usize) -> String {
     v.map_or("-".into(), |v| format!("{v:.digits$}"))
@@ -75,6 +150,48 @@ fn accuracy_rows(out: &mut String, label: &str, a: Option<&ModelAccuracy>) {
         p.orientation_mean_deg,
         p.orientation_max_deg,
         p.orientation_rms_deg
+    );
+}
+
+/// The joint refinement's parameters (start: the two steps' values) with their uncertainties.
+fn joint_section(out: &mut String, cal: &Calibration) {
+    let Some(j) = &cal.joint else {
+        return;
+    };
+    let f = &j.fit;
+    let _ = writeln!(
+        out,
+        "\n## Joint refinement (every parameter of both steps on the M_i and the platform poses)\n\n\
+         {} M_i and {} platform residuals (one degree weighted as {:.3} mm); training residual RMS \
+         {:.4} mm at the two steps' result, {:.4} mm refined ({}, {} evaluations). The start column \
+         is the two steps' value; the standard errors are those of the joint fit.",
+        f.m_residuals,
+        f.pose_residuals,
+        f.phi_weight_mm_per_deg,
+        f.start_rms_mm,
+        f.rms_mm,
+        f.status,
+        f.evaluations
+    );
+    params_table(out, "parameter", &f.params);
+}
+
+/// The paper's two steps and the joint refinement side by side (with `Method::Joint`).
+fn method_rows(out: &mut String, cal: &Calibration) {
+    let Some(j) = &cal.joint else {
+        return;
+    };
+    accuracy_rows(out, "paper's two steps, train", Some(&cal.paper.train));
+    accuracy_rows(out, "joint, train", Some(&j.accuracy.train));
+    accuracy_rows(out, "paper's two steps, **test**", cal.paper.test.as_ref());
+    accuracy_rows(out, "joint, **test**", j.accuracy.test.as_ref());
+    let _ = writeln!(
+        out,
+        "\nThe calibrated robot (\"after\") is {}.",
+        match cal.used {
+            crate::calibrate::Method::Joint => "the joint refinement's",
+            crate::calibrate::Method::Paper => "the paper's two steps' (see the warnings)",
+        }
     );
 }
 
@@ -172,6 +289,7 @@ pub fn write_report(
         cal.step2.phi_weight_mm_per_deg
     );
     params_table(&mut md, "parameter", &cal.step2.params);
+    joint_section(&mut md, cal);
     // Accuracy.
     let _ = writeln!(
         md,
@@ -184,10 +302,26 @@ pub fn write_report(
     accuracy_rows(&mut md, "after, train", Some(&cal.after.train));
     accuracy_rows(&mut md, "before, **test**", cal.before.test.as_ref());
     accuracy_rows(&mut md, "after, **test**", cal.after.test.as_ref());
-    if !cal.warnings.is_empty() {
+    method_rows(&mut md, cal);
+    let others = other_warnings(cal);
+    if !others.is_empty() {
         let _ = writeln!(md, "\n## Warnings\n");
-        for w in &cal.warnings {
+        for w in others {
             let _ = writeln!(md, "- {w}");
+        }
+    }
+    let pairs = correlated_pairs(cal);
+    if !pairs.is_empty() {
+        let _ = writeln!(
+            md,
+            "\n## Strongly correlated parameters\n\n\
+             Pairs whose estimates correlate with |rho| > {}: the data hardly separate them, so \
+             each value of a pair is uncertain along the other (a combination of the two is \
+             well determined).\n\n| fit | parameters | rho |\n|---|---|---|",
+            crate::step1::CORRELATION_WARNING
+        );
+        for p in &pairs {
+            let _ = writeln!(md, "| {} | {}, {} | {:+.3} |", p.fit, p.a, p.b, p.rho);
         }
     }
     let _ = writeln!(

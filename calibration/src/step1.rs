@@ -54,8 +54,12 @@ impl FreeGeometry {
         l_ce: false,
     };
 
-    /// Names, units and bounds of the free geometric parameters around `leg`, in vector order.
-    fn params(&self, leg: &LegConfig) -> Vec<(&'static str, &'static str, f64, f64, f64)> {
+    /// Names, units, values and bounds of the free geometric parameters around `leg`, in
+    /// vector order.
+    pub(crate) fn params(
+        &self,
+        leg: &LegConfig,
+    ) -> Vec<(&'static str, &'static str, f64, f64, f64)> {
         let mut v = Vec::new();
         if self.psi {
             v.push((
@@ -216,8 +220,14 @@ pub enum Step1Error {
     },
 }
 
-/// The leg with the map and geometry of a parameter vector.
-fn leg_of(base: &LegConfig, free: FreeGeometry, kind: TendonMapKind, x: &[f64]) -> LegConfig {
+/// The leg with the map and geometry of a parameter vector (the free geometry, then the map
+/// coefficients of `kind`).
+pub(crate) fn leg_of(
+    base: &LegConfig,
+    free: FreeGeometry,
+    kind: TendonMapKind,
+    x: &[f64],
+) -> LegConfig {
     let mut leg = base.clone();
     let k = free.apply(x, &mut leg);
     leg.tendon_map = TendonMapSpec {
@@ -313,12 +323,18 @@ impl Problem for LegProblem<'_> {
 
     fn residuals(&mut self, x: &[f64], r: &mut [f64]) -> Result<(), String> {
         let leg = Leg::from_config(&leg_of(self.base, self.free, self.kind, x));
-        for (k, o) in self.obs.iter().enumerate() {
-            let m = predict_m(&leg, o.dl_mm);
-            r[2 * k] = m[0] - o.m[0];
-            r[2 * k + 1] = m[1] - o.m[1];
-        }
+        m_residuals(&leg, self.obs, r);
         Ok(())
+    }
+}
+
+/// The residuals of measured M_i, 2 per observation: (dx, dy) of the model's M minus the
+/// measured one, mm.
+pub(crate) fn m_residuals(leg: &Leg, obs: &[LegObservation], r: &mut [f64]) {
+    for (k, o) in obs.iter().enumerate() {
+        let m = predict_m(leg, o.dl_mm);
+        r[2 * k] = m[0] - o.m[0];
+        r[2 * k + 1] = m[1] - o.m[1];
     }
 }
 

@@ -9,6 +9,7 @@
 //! [`Step2Params::extended`] frees the link lengths l_st as well.
 
 use crate::lsq::{self, Options, Problem};
+use crate::params::ParamBox;
 use crate::step1::{describe, Correlated, Param};
 use pcr_kinematics::{Pose, Robot};
 use pcr_robot::RobotConfig;
@@ -151,7 +152,9 @@ struct PlatformProblem<'a> {
     w: f64,
 }
 
-fn robot_of(base: &RobotConfig, free: Step2Params, x: &[f64]) -> RobotConfig {
+/// The robot `base` with the platform parameters of `x` (r_p, theta_p per joint, then l_st
+/// per leg when freed).
+pub(crate) fn robot_of(base: &RobotConfig, free: Step2Params, x: &[f64]) -> RobotConfig {
     let mut c = base.clone();
     for i in 0..3 {
         c.legs[i].r_p_mm = x[2 * i];
@@ -170,15 +173,50 @@ impl Problem for PlatformProblem<'_> {
 
     fn residuals(&mut self, x: &[f64], r: &mut [f64]) -> Result<(), String> {
         let robot = Robot::new(&robot_of(self.base, self.free, x)).map_err(|e| e.to_string())?;
-        for (k, o) in self.obs.iter().enumerate() {
-            let p = predict_pose(&robot, &o.q, &o.pose)
-                .ok_or_else(|| format!("no forward kinematics for q = {:?}", o.q))?;
-            r[3 * k] = p[0] - o.pose[0];
-            r[3 * k + 1] = p[1] - o.pose[1];
-            r[3 * k + 2] = self.w * angle_diff_deg(p[2], o.pose[2]);
-        }
-        Ok(())
+        pose_residuals(&robot, self.obs, self.w, r)
     }
+}
+
+/// The residuals of measured platform poses, 3 per pose: (dx mm, dy mm, w dphi) with `w` the
+/// weight of a degree in mm; `Err` where the forward kinematics fails.
+pub(crate) fn pose_residuals(
+    robot: &Robot,
+    obs: &[PoseObservation],
+    w: f64,
+    r: &mut [f64],
+) -> Result<(), String> {
+    for (k, o) in obs.iter().enumerate() {
+        let p = predict_pose(robot, &o.q, &o.pose)
+            .ok_or_else(|| format!("no forward kinematics for q = {:?}", o.q))?;
+        r[3 * k] = p[0] - o.pose[0];
+        r[3 * k + 1] = p[1] - o.pose[1];
+        r[3 * k + 2] = w * angle_diff_deg(p[2], o.pose[2]);
+    }
+    Ok(())
+}
+
+/// The platform parameters of step 2 around `base` in vector order, with their bounds:
+/// r_p within +-30 %, theta_p within +-15 deg, l_st (when freed) within +-15 mm.
+pub(crate) fn platform_box(base: &RobotConfig, free: Step2Params) -> ParamBox {
+    let mut b = ParamBox::default();
+    for (i, l) in base.legs.iter().enumerate() {
+        let (r, t) = (l.r_p_mm, l.theta_p_deg);
+        b.push(format!("r_p_mm[{}]", i + 1), "mm", r, 0.7 * r, 1.3 * r);
+        b.push(
+            format!("theta_p_deg[{}]", i + 1),
+            "deg",
+            t,
+            t - 15.0,
+            t + 15.0,
+        );
+    }
+    if free.l_st {
+        for (i, l) in base.legs.iter().enumerate() {
+            let s = l.l_st_mm;
+            b.push(format!("l_st_mm[{}]", i + 1), "mm", s, s - 15.0, s + 15.0);
+        }
+    }
+    b
 }
 
 /// The default weight of a degree in millimetres: the arc of the mean platform joint radius.
@@ -201,35 +239,17 @@ pub fn fit_platform(
             need: n / 3 + 2,
         });
     }
-    let mut x0 = Vec::with_capacity(n);
-    let mut lo = Vec::with_capacity(n);
-    let mut hi = Vec::with_capacity(n);
-    let mut names = Vec::with_capacity(n);
-    for (i, l) in base.legs.iter().enumerate() {
-        x0.extend([l.r_p_mm, l.theta_p_deg]);
-        lo.extend([0.7 * l.r_p_mm, l.theta_p_deg - 15.0]);
-        hi.extend([1.3 * l.r_p_mm, l.theta_p_deg + 15.0]);
-        names.push((format!("r_p_mm[{}]", i + 1), "mm".to_string()));
-        names.push((format!("theta_p_deg[{}]", i + 1), "deg".to_string()));
-    }
-    if free.l_st {
-        for (i, l) in base.legs.iter().enumerate() {
-            x0.push(l.l_st_mm);
-            lo.push(l.l_st_mm - 15.0);
-            hi.push(l.l_st_mm + 15.0);
-            names.push((format!("l_st_mm[{}]", i + 1), "mm".to_string()));
-        }
-    }
+    let b = platform_box(base, free);
     let mut prob = PlatformProblem {
         base,
         free,
         obs: train,
         w: phi_weight_mm_per_deg,
     };
-    let fit = lsq::solve(&mut prob, &x0, &lo, &hi, &Options::default())
+    let fit = lsq::solve(&mut prob, &b.start, &b.lower, &b.upper, &Options::default())
         .map_err(|e| Step2Error::Solver(e.to_string()))?;
     let config = robot_of(base, free, &fit.x);
-    let (params, correlated) = describe(&fit, &names, &x0);
+    let (params, correlated) = describe(&fit, &b.names, &b.start);
     Ok(Step2Fit {
         config,
         params,

@@ -48,7 +48,7 @@ pub use interpolator::{
 pub use offline::{plan_moves, OfflinePlan, PlannedCycle, CYCLE_S};
 pub use planned::{MotionLimits, PlannerSource};
 pub use plant_drive::{plant_backend, PlantDrive, PlantSensor};
-pub use recorder::{Measured, Recorder};
+pub use recorder::{Measured, Recorder, RowMaker};
 pub use runtime::{
     CycleOutput, IdealChain, InProcessChain, InterimChain, RunError, SimChain, SimChainError,
 };

@@ -50,15 +50,67 @@ fn io_error(e: pcr_recording::RecordingError) -> io::Error {
 /// written (give it an unbuffered file: the row is then one `write` to the operating system).
 pub struct Recorder<W: Write> {
     out: RecordingWriter<W>,
+    rows: RowMaker,
+}
+
+/// Makes the rows of driver states: times relative to the first row (s), poses in mm and
+/// degrees, non-finite values left empty; a row whose time does not increase is skipped. The
+/// [`Recorder`] writes its rows to the CSV; a recording with further sinks (the supervisor's
+/// MCAP) makes each row once and hands it to every sink.
+#[derive(Debug, Clone, Copy)]
+pub struct RowMaker {
     t0: Option<f64>,
     last_t: f64,
+}
+
+impl Default for RowMaker {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl RowMaker {
+    /// Before the first row.
+    pub fn new() -> Self {
+        Self {
+            t0: None,
+            last_t: f64::NEG_INFINITY,
+        }
+    }
+
+    /// The row a driver state and a measurement make (time relative to the first row), or
+    /// `None` when its time does not increase (a row to skip). Write it with
+    /// [`Recorder::write`] (e.g. after an experiment's annotator has labelled it).
+    pub fn row_of(&mut self, s: &DriverStateMsg, m: &Measured) -> Option<Row> {
+        let t0 = *self.t0.get_or_insert(s.t_s);
+        let t = s.t_s - t0;
+        if t <= self.last_t || !t.is_finite() {
+            return None;
+        }
+        self.last_t = t;
+        let finite3 = |p: [f64; 3]| p.iter().all(|v| v.is_finite());
+        let mut row = Row::new(t, s.commanded);
+        if let Some(p) = m.pose.filter(|p| finite3(*p)) {
+            row.pose = [Some(p[0]), Some(p[1]), Some(p[2].to_degrees())];
+        }
+        for (cell, j) in row.m.iter_mut().zip(m.joints) {
+            if let Some(p) = j.filter(|p| p.iter().all(|v| v.is_finite())) {
+                *cell = [Some(p[0]), Some(p[1])];
+            }
+        }
+        let p = s.planned;
+        if finite3(p) {
+            row.planned = [Some(p[0]), Some(p[1]), Some(p[2].to_degrees())];
+        }
+        Some(row)
+    }
 }
 
 impl<W: Write> std::fmt::Debug for Recorder<W> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Recorder")
             .field("rows", &self.out.rows_written())
-            .field("last_t", &self.last_t)
+            .field("last_t", &self.rows.last_t)
             .finish()
     }
 }
@@ -93,8 +145,7 @@ impl<W: Write> Recorder<W> {
             .collect();
         Ok(Self {
             out: RecordingWriter::new(out, &meta, &known, &extra).map_err(io_error)?,
-            t0: None,
-            last_t: f64::NEG_INFINITY,
+            rows: RowMaker::new(),
         })
     }
 
@@ -121,27 +172,7 @@ impl<W: Write> Recorder<W> {
     /// `None` when its time does not increase (a row to skip). Write it with [`Self::write`]
     /// (e.g. after an experiment's annotator has labelled it).
     pub fn row_of(&mut self, s: &DriverStateMsg, m: &Measured) -> Option<Row> {
-        let t0 = *self.t0.get_or_insert(s.t_s);
-        let t = s.t_s - t0;
-        if t <= self.last_t || !t.is_finite() {
-            return None;
-        }
-        self.last_t = t;
-        let finite3 = |p: [f64; 3]| p.iter().all(|v| v.is_finite());
-        let mut row = Row::new(t, s.commanded);
-        if let Some(p) = m.pose.filter(|p| finite3(*p)) {
-            row.pose = [Some(p[0]), Some(p[1]), Some(p[2].to_degrees())];
-        }
-        for (cell, j) in row.m.iter_mut().zip(m.joints) {
-            if let Some(p) = j.filter(|p| p.iter().all(|v| v.is_finite())) {
-                *cell = [Some(p[0]), Some(p[1])];
-            }
-        }
-        let p = s.planned;
-        if finite3(p) {
-            row.planned = [Some(p[0]), Some(p[1]), Some(p[2].to_degrees())];
-        }
-        Some(row)
+        self.rows.row_of(s, m)
     }
 
     /// Writes (and flushes) a row made by [`Self::row_of`]; `extra` holds the cells of the

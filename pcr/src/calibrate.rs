@@ -1,12 +1,13 @@
-//! `pcr calibrate`: the paper's two-step calibration from a recording, and `pcr calibrate leg`
-//! for one continuum segment on its own.
+//! `pcr calibrate`: the paper's two-step calibration from a recording, refined jointly by
+//! default (`--method paper` stops after the two steps), and `pcr calibrate leg` for one
+//! continuum segment on its own.
 //!
 //! - `pcr calibrate --robot R --data rec.csv --out calibrated.toml --report DIR --json out.json`
 //! - `pcr calibrate leg --data leg.csv --l-c-mm L [--l-ce-mm E] --json out.json`
 
 use crate::clock::utc_now;
 use anyhow::{bail, Context};
-use pcr_calibration::calibrate::{self, Calibration, Options, ParameterSet};
+use pcr_calibration::calibrate::{self, Calibration, Method, Options, ParameterSet};
 use pcr_calibration::report::{opt, write_report};
 use pcr_calibration::segment::{self, SegmentOptions};
 use pcr_calibration::StaticData;
@@ -39,6 +40,16 @@ enum Params {
     Extended,
 }
 
+/// How the parameters are fitted.
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum MethodArg {
+    /// The paper's two steps, then every parameter of both refined jointly on the M_i and the
+    /// platform poses.
+    Joint,
+    /// The paper's two steps alone (for comparison with the paper).
+    Paper,
+}
+
 #[derive(clap::Args)]
 struct RobotArgs {
     /// Robot configuration the recording was made with (the start of the fit); default: the
@@ -60,6 +71,9 @@ struct RobotArgs {
     /// Parameter set.
     #[arg(long, value_enum, default_value = "paper")]
     params: Params,
+    /// Fitting method: the paper's two steps refined jointly (default), or the two steps alone.
+    #[arg(long, value_enum, default_value = "joint")]
+    method: MethodArg,
     /// Use this Table I function (1..13) instead of selecting by test RMS.
     #[arg(long, value_parser = clap::value_parser!(u8).range(1..=13))]
     function: Option<u8>,
@@ -139,6 +153,10 @@ fn run_robot(a: RobotArgs) -> anyhow::Result<()> {
             Params::Paper => ParameterSet::Paper,
             Params::Extended => ParameterSet::Extended,
         },
+        method: match a.method {
+            MethodArg::Joint => Method::Joint,
+            MethodArg::Paper => Method::Paper,
+        },
         function: a
             .function
             .and_then(|f| TendonMapKind::from_table_index(f as usize)),
@@ -153,7 +171,7 @@ fn run_robot(a: RobotArgs) -> anyhow::Result<()> {
     }
     let static_data = StaticData::from_recording(&rec, &origin, opts.seed, opts.test_fraction)?;
     let cal = calibrate::calibrate_data(&start, &static_data, &opts)?;
-    print_summary(&cal);
+    print_summary(&cal, a.report.as_deref());
     if let Some(out) = &a.out {
         write_file(out, &calibrate::robot_file(&cal, &utc_now()))?;
         println!("calibrated robot: {}", out.display());
@@ -169,7 +187,7 @@ fn run_robot(a: RobotArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn print_summary(cal: &Calibration) {
+fn print_summary(cal: &Calibration, report: Option<&Path>) {
     println!(
         "{}: {} static poses ({} train, {} test)",
         cal.data.file, cal.data.poses, cal.data.train, cal.data.test
@@ -206,10 +224,37 @@ fn print_summary(cal: &Calibration) {
             );
         }
     };
+    if let Some(j) = &cal.joint {
+        let pos = |a: Option<&calibrate::ModelAccuracy>| opt(a.map(|a| a.pose.position_rms_mm), 3);
+        println!(
+            "paper's two steps: platform position RMS train {} mm, test {} mm; joint refinement: train {} mm, test {} mm ({} parameters, {})",
+            pos(Some(&cal.paper.train)),
+            pos(cal.paper.test.as_ref()),
+            pos(Some(&j.accuracy.train)),
+            pos(j.accuracy.test.as_ref()),
+            j.fit.params.len(),
+            j.fit.status
+        );
+    }
+    println!(
+        "calibrated robot: {}",
+        match cal.used {
+            Method::Joint => "the joint refinement",
+            Method::Paper => "the paper's two steps",
+        }
+    );
     line("train", Some(&cal.before.train), Some(&cal.after.train));
     line("test ", cal.before.test.as_ref(), cal.after.test.as_ref());
-    for w in &cal.warnings {
+    for w in pcr_calibration::report::other_warnings(cal) {
         eprintln!("warning: {w}");
+    }
+    // The correlated pairs in one line; their coefficients are in the report.
+    if let Some(line) = pcr_calibration::report::correlated_summary(cal) {
+        let detail = match report {
+            Some(dir) => format!("rho in {}", dir.join("report.md").display()),
+            None => "rho with --report DIR or --json FILE".into(),
+        };
+        eprintln!("warning: {line} ({detail})");
     }
 }
 

@@ -6,6 +6,7 @@ use clap::{Parser, Subcommand};
 
 mod calibrate;
 mod clock;
+mod convert;
 mod csvio;
 mod evaluate;
 mod experiment;
@@ -59,6 +60,9 @@ enum Command {
     Experiment(experiment::Args),
     /// Qualisys QTM RT tools: server parameters, streaming to CSV, registration, simulator.
     Qtm(qtm::Args),
+    /// A recording (CSV) to MCAP, for Foxglove, PlotJuggler and `ros2 bag`: every column on
+    /// `/recording/row`, poses, the robot drawn with `--robot`.
+    Convert(convert::Args),
 }
 
 fn main() -> std::process::ExitCode {
@@ -84,6 +88,7 @@ fn main() -> std::process::ExitCode {
         Command::Loop(a) => loop_cmd::run(a),
         Command::Experiment(a) => experiment::run(a),
         Command::Qtm(a) => qtm::run(a),
+        Command::Convert(a) => convert::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -86,11 +86,11 @@ enum Shape {
     /// 50 mm at 50 mm/s, the chain's built-in CIRCLE): a dwell of 0.2 s, a line to the start
     /// point, the circle, a dwell of 0.2 s and a line back to --from.
     Circle {
-        /// Radius, mm.
-        #[arg(long)]
+        /// Radius, mm (the paper's 50 mm unless given).
+        #[arg(long, default_value_t = 50.0, allow_hyphen_values = true)]
         radius: f64,
-        /// Speed along the path, mm/s.
-        #[arg(long)]
+        /// Speed along the path, mm/s (the paper's 50 mm/s unless given).
+        #[arg(long, default_value_t = 50.0, allow_hyphen_values = true)]
         speed: f64,
         /// Centre x, mm.
         #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
@@ -114,11 +114,11 @@ enum Shape {
     /// (+side/2, -side/2), counter-clockwise sides with a dwell of 0.1 s after each line, and a
     /// line back to --from.
     Square {
-        /// Side length, mm.
-        #[arg(long)]
+        /// Side length, mm (the paper's 50 mm unless given).
+        #[arg(long, default_value_t = 50.0, allow_hyphen_values = true)]
         side: f64,
-        /// Speed along each side, mm/s.
-        #[arg(long)]
+        /// Speed along each side, mm/s (the paper's 50 mm/s unless given).
+        #[arg(long, default_value_t = 50.0, allow_hyphen_values = true)]
         speed: f64,
         /// Centre x, mm.
         #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]

@@ -141,6 +141,28 @@ fn calibrate_writes_a_robot_that_loads_json_and_report() {
             < 0.05
     );
     assert!(v["step1"][0]["params"][0]["std"].as_f64().unwrap() > 0.0);
+    // By default the two steps are refined jointly; both results are reported.
+    assert_eq!(v["options"]["method"], "joint");
+    assert_eq!(v["used"], "joint");
+    let joint = &v["joint"];
+    assert!(joint["fit"]["params"][0]["std"].as_f64().unwrap() > 0.0);
+    assert_eq!(joint["fit"]["params"][0]["name"], "psi_deg[1]");
+    let paper_test = v["paper"]["test"]["pose"]["position_rms_mm"]
+        .as_f64()
+        .unwrap();
+    let joint_test = joint["accuracy"]["test"]["pose"]["position_rms_mm"]
+        .as_f64()
+        .unwrap();
+    assert_eq!(
+        Some(joint_test),
+        v["after"]["test"]["pose"]["position_rms_mm"].as_f64()
+    );
+    assert!(
+        paper_test < 0.05 && joint_test < 0.05,
+        "{paper_test} {joint_test}"
+    );
+    let md = std::fs::read_to_string(report.join("report.md")).unwrap();
+    assert!(md.contains("## Joint refinement") && md.contains("| joint, **test** |"));
     for f in [
         "report.md",
         "table1.svg",
@@ -163,6 +185,39 @@ fn calibrate_writes_a_robot_that_loads_json_and_report() {
         "{}",
         stderr(&o)
     );
+}
+
+/// `--method paper` stops after the paper's two steps: no joint fit, the robot of step 2.
+#[test]
+fn calibrate_method_paper_keeps_the_two_steps() {
+    let d = tempfile::tempdir().unwrap();
+    let rec = write(d.path(), "cal.csv", &recording(&deviated(), 45));
+    let json = d.path().join("cal.json");
+    let o = pcr(&[
+        "calibrate",
+        "--data",
+        rec.to_str().unwrap(),
+        "--method",
+        "paper",
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(v["options"]["method"], "paper");
+    assert_eq!(v["used"], "paper");
+    assert!(v["joint"].is_null());
+    assert_eq!(v["after"], v["paper"]);
+    let o = pcr(&[
+        "calibrate",
+        "--data",
+        rec.to_str().unwrap(),
+        "--method",
+        "both",
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--method"), "{}", stderr(&o));
 }
 
 #[test]

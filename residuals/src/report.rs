@@ -2,7 +2,7 @@
 //! evidence, every candidate's score, the verdict, and the residual plots behind each decision.
 
 use crate::attribution::{Attribution, Verdict};
-use pcr_calibration::figures::{curve_panels, CurvePanel, FigureError};
+use pcr_calibration::figures::{curve_panels, curve_panels_shared, CurvePanel, FigureError};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -63,13 +63,18 @@ pub fn write_report(dir: &Path, a: &Attribution, inputs: &str) -> Result<PathBuf
     }
     let _ = writeln!(
         md,
-        "\n**Verdict: {}**. Remaining held-out RMS of the weighted residual {:.3} mm, {:.3} mm above \
+        "\n**Verdict: {}{}**. Remaining held-out RMS of the weighted residual {:.3} mm, {:.3} mm above \
          what the capture noise explains.\n\n![residual over time](residual_time.svg)\n\n\
          (Each mark is the largest residual of a short run of consecutive held-out rows.)",
         match a.verdict {
             Verdict::Explained => "explained",
             Verdict::PartlyExplained => "partly explained",
             Verdict::Unexplained => "unexplained",
+        },
+        if a.timing_finding.is_some() {
+            ", with a timing declaration error (see Timing)"
+        } else {
+            ""
         },
         a.remaining_rms_mm,
         a.remaining_excess_mm
@@ -159,7 +164,8 @@ pub fn write_report(dir: &Path, a: &Attribution, inputs: &str) -> Result<PathBuf
             .map(|p| (p.0, p.2))
             .collect::<Vec<_>>(),
     );
-    curve_panels(
+    // One scale for both panels, so that the gain shows.
+    curve_panels_shared(
         &dir.join("residual_time.svg"),
         "Position residual of held-out rows over time",
         &[

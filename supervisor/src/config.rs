@@ -253,6 +253,29 @@ pub struct ProcessConfig {
     pub args: Vec<String>,
 }
 
+/// The live view (`[live]`): the run's channels served over the Foxglove WebSocket protocol
+/// while the supervisor runs (open `ws://host:port` in Foxglove; `docs/foxglove-layout.json`).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LiveConfig {
+    /// Address to listen on (default 127.0.0.1: this machine only).
+    #[serde(default = "LiveConfig::d_host")]
+    pub host: String,
+    /// TCP port (default 8765, Foxglove's; 0: any free port, printed at start and by `ctl
+    /// status`).
+    #[serde(default = "LiveConfig::d_port")]
+    pub port: u16,
+}
+
+impl LiveConfig {
+    fn d_host() -> String {
+        "127.0.0.1".into()
+    }
+    fn d_port() -> u16 {
+        8765
+    }
+}
+
 /// The supervisor configuration.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -291,6 +314,9 @@ pub struct SupervisorConfig {
     /// The motion-capture system, if any.
     #[serde(default)]
     pub capture: Option<CaptureConfig>,
+    /// The live view over the Foxglove WebSocket protocol, if any.
+    #[serde(default)]
+    pub live: Option<LiveConfig>,
     /// The processes.
     #[serde(default)]
     pub process: Vec<ProcessConfig>,
@@ -349,6 +375,14 @@ impl SupervisorConfig {
         ] {
             if !(v.is_finite() && v > 0.0) {
                 return Err(bad(k.into(), format!("must be a positive number, got {v}")));
+            }
+        }
+        if let Some(l) = &self.live {
+            if l.host.trim().is_empty() {
+                return Err(bad(
+                    "live.host".into(),
+                    "must name an address to listen on (e.g. \"127.0.0.1\")".into(),
+                ));
             }
         }
         if let Some(us) = self.realtime.cpu_dma_latency_us {
@@ -547,6 +581,25 @@ backend = "sim"
         assert!(e.contains("capture.simulate"), "{e}");
         let e = err(&format!("{OK}\n[capture]\nsystem = \"vicon\"\n"));
         assert!(e.contains("capture.system"), "{e}");
+        let e = err(&format!("{OK}\n[live]\nport = 70000\n"));
+        assert!(e.contains("live.port"), "{e}");
+        let e = err(&format!("{OK}\n[live]\nport = -1\n"));
+        assert!(e.contains("live.port"), "{e}");
+        let e = err(&format!("{OK}\n[live]\nhost = \"\"\n"));
+        assert!(e.contains("live.host"), "{e}");
+        let e = err(&format!("{OK}\n[live]\nprot = 1\n"));
+        assert!(e.contains("live") && e.contains("prot"), "{e}");
+    }
+
+    #[test]
+    fn live_defaults_to_foxglove_s_port_on_this_machine() {
+        let c = SupervisorConfig::from_toml_str(&format!("{OK}\n[live]\n"), "t").unwrap();
+        let l = c.live.unwrap();
+        assert_eq!((l.host.as_str(), l.port), ("127.0.0.1", 8765));
+        assert!(SupervisorConfig::from_toml_str(OK, "t")
+            .unwrap()
+            .live
+            .is_none());
     }
 
     #[test]

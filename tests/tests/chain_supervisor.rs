@@ -6,7 +6,7 @@
 //! recording directory, and checks that no iceoryx2 file of its prefix is left behind. The
 //! tests run one at a time (2 cores): heartbeat timing must not suffer from a neighbour's load.
 
-use pcr_integration_tests::{chain_bin_dir, workspace};
+use pcr_integration_tests::{chain_bin_dir, check_mcap, mcap_beside, workspace};
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
@@ -332,6 +332,10 @@ fn a_supervisor_killed_mid_run_leaves_every_row_it_recorded() {
     for (i, w) in r.rows.windows(2).enumerate() {
         assert!(w[1].t_s > w[0].t_s, "row {i}: time goes back");
     }
+    // The MCAP beside it has no summary (never closed); its complete chunks read in order
+    // (as `mcap recover` does) are the CSV's first rows, to within a second of its last.
+    let summary = check_mcap(&mcap_beside(&rec), &rec, &["--killed"]);
+    eprintln!("{summary}");
     // The dead supervisor's iceoryx2 files: a later start cleans them; here, by hand.
     for d in ["/dev/shm", "/tmp/iceoryx2"] {
         for n in chain.leftovers() {

@@ -1,0 +1,358 @@
+//! The joint calibration against the capture-noise floor: the paper's calibration experiment
+//! recorded on the in-process chain against the simulated plant with only its geometry
+//! deviations, its true (tanh) tendon map and capture noise on, calibrated from the recording
+//! alone. The floor is the plant's own noise-free truth against the noisy measurement on the
+//! same held-out rows (the same run with the capture noise off: the chain is open loop, so
+//! both runs command the same motor positions row by row).
+//!
+//! Errors are taken per held-out row (every settled row of a test visit, its commanded motors
+//! through the model's forward kinematics against its measured position), as a user checks a
+//! model against a recording; the calibration's own figures average each visit's rows first.
+
+use pcr_calibration::calibrate::{calibrate, Calibration, Method, Options};
+use pcr_calibration::step2::predict_pose;
+use pcr_experiments::{
+    run_in_process, CalibrationOptions, Design, RunSetup, StaticDesign, Tolerances, VisitTiming,
+};
+use pcr_kinematics::Robot;
+use pcr_plant::PlantConfig;
+use pcr_recording::{Recording, Row, Split};
+use pcr_robot::RobotConfig;
+use std::sync::OnceLock;
+
+/// The plant with the prototype's geometry deviations scaled by `scale` and its tendon map;
+/// every other effect off; capture noise (0.05 mm, 0.05 deg per coordinate) on or off.
+fn geometry_and_map_plant(scale: f64, noise: bool) -> PlantConfig {
+    let proto = PlantConfig::prototype();
+    let mut p = PlantConfig::ideal();
+    p.geometry = proto.geometry;
+    let g = &mut p.geometry;
+    for d in [
+        &mut g.d_r_base_mm,
+        &mut g.d_beta_deg,
+        &mut g.d_psi_deg,
+        &mut g.d_l_c_mm,
+        &mut g.d_l_ce_mm,
+        &mut g.d_l_st_mm,
+        &mut g.d_r_p_mm,
+        &mut g.d_theta_p_deg,
+    ] {
+        d.iter_mut().for_each(|v| *v *= scale);
+    }
+    p.tendon_map = proto.tendon_map;
+    p.capture.noise = noise;
+    p
+}
+
+/// The paper's calibration set with 9 points per scaled boundary (81 poses, 3 per group held
+/// out: 54 train, 27 test), 0.4 s of settled rows per visit.
+fn design() -> Design {
+    let cal = StaticDesign::calibration(
+        &Robot::nominal(),
+        &CalibrationOptions {
+            points: 9,
+            test_per_group: 3,
+            ..CalibrationOptions::default()
+        },
+        VisitTiming {
+            speed_mm_s: 40.0,
+            settle_s: 0.4,
+            measure_s: 0.4,
+        },
+    )
+    .unwrap();
+    Design::Static(cal)
+}
+
+fn record(plant: &PlantConfig) -> Recording {
+    let setup = RunSetup {
+        model: RobotConfig::nominal(),
+        plant_robot: RobotConfig::nominal(),
+        plant: plant.clone(),
+        period_s: 0.02,
+        seed: 1,
+        metadata: vec![],
+        tolerances: Tolerances::default(),
+        capture_latency_s: None,
+    };
+    let mut out = Vec::new();
+    run_in_process(&design(), &setup, &mut out, &mut |_| {}).unwrap();
+    Recording::read(out.as_slice(), "plant run").unwrap()
+}
+
+/// The held-out rows: settled rows of the test set with a measured pose.
+fn held_out(row: &Row) -> bool {
+    row.settled == Some(true) && row.set == Some(Split::Test) && row.measured_pose().is_some()
+}
+
+/// Squared position error of every held-out row of `noisy` against `reference` of the row
+/// (its index in the recording and the row), grouped by visit (pose id), mm^2.
+fn held_out_errors(
+    noisy: &Recording,
+    reference: impl Fn(usize, &Row) -> [f64; 2],
+) -> Vec<(u64, f64)> {
+    noisy
+        .rows
+        .iter()
+        .enumerate()
+        .filter(|(_, r)| held_out(r))
+        .map(|(k, row)| {
+            let m = row.measured_pose().unwrap();
+            let r = reference(k, row);
+            (
+                row.pose_id.unwrap(),
+                (m[0] - r[0]).powi(2) + (m[1] - r[1]).powi(2),
+            )
+        })
+        .collect()
+}
+
+fn rms(e: &[(u64, f64)]) -> f64 {
+    (e.iter().map(|v| v.1).sum::<f64>() / e.len().max(1) as f64).sqrt()
+}
+
+/// The floor's errors: the plant's noise-free pose of each row against its noisy measurement.
+fn floor_errors(noisy: &Recording, clean: &Recording) -> Vec<(u64, f64)> {
+    assert_eq!(noisy.rows.len(), clean.rows.len());
+    held_out_errors(noisy, |k, row| {
+        let c = &clean.rows[k];
+        assert_eq!((c.q, c.set, c.settled), (row.q, row.set, row.settled));
+        let p = c.measured_pose().unwrap();
+        [p[0], p[1]]
+    })
+}
+
+/// A model's errors: the forward kinematics of each row's commanded motors against its
+/// measured position.
+fn model_errors(robot: &RobotConfig, noisy: &Recording) -> Vec<(u64, f64)> {
+    let model = Robot::new(robot).unwrap();
+    held_out_errors(noisy, |_, row| {
+        let m = row.measured_pose().unwrap();
+        let p = predict_pose(&model, &row.q.map(f64::from), &m).unwrap();
+        [p[0], p[1]]
+    })
+}
+
+/// Mean over the held-out rows of (a^2 - b^2) and its standard error, from the per-visit
+/// means (the rows of a visit share the model error, so the visits are the independent
+/// samples), mm^2.
+fn paired_difference(a: &[(u64, f64)], b: &[(u64, f64)]) -> (f64, f64) {
+    let mut visits: Vec<(u64, f64, usize)> = Vec::new();
+    for ((id, ea), (idb, eb)) in a.iter().zip(b) {
+        assert_eq!(id, idb);
+        match visits.last_mut() {
+            Some(v) if v.0 == *id => {
+                v.1 += ea - eb;
+                v.2 += 1;
+            }
+            _ => visits.push((*id, ea - eb, 1)),
+        }
+    }
+    let d: Vec<f64> = visits.iter().map(|v| v.1 / v.2 as f64).collect();
+    let n = d.len() as f64;
+    let mean = d.iter().sum::<f64>() / n;
+    let var = d.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0);
+    (mean, (var / n).sqrt())
+}
+
+/// One plant's recordings and both calibrations of the noisy one.
+struct Case {
+    noisy: Recording,
+    clean: Option<Recording>,
+    joint: Calibration,
+    paper: Calibration,
+}
+
+fn case(scale: f64, with_clean: bool) -> Case {
+    let noisy = record(&geometry_and_map_plant(scale, true));
+    let clean = with_clean.then(|| record(&geometry_and_map_plant(scale, false)));
+    let nominal = RobotConfig::nominal();
+    let joint = calibrate(&nominal, &noisy, "plant run", &Options::default()).unwrap();
+    let paper_opts = Options {
+        method: Method::Paper,
+        ..Options::default()
+    };
+    let paper = calibrate(&nominal, &noisy, "plant run", &paper_opts).unwrap();
+    Case {
+        noisy,
+        clean,
+        joint,
+        paper,
+    }
+}
+
+/// The prototype's deviations, with the noise-free run for the floor (shared by the tests).
+fn prototype() -> &'static Case {
+    static CASE: OnceLock<Case> = OnceLock::new();
+    CASE.get_or_init(|| case(1.0, true))
+}
+
+/// The acceptance of issue 17, item 4: held-out row RMS within 1.15 times the floor, and the
+/// joint result no worse than the paper's two steps on the same rows (beyond two standard
+/// errors of their paired difference: here the two differ by less than the sampling error).
+#[test]
+fn joint_calibration_reaches_the_noise_floor_on_held_out_rows() {
+    let c = prototype();
+    let floor = floor_errors(&c.noisy, c.clean.as_ref().unwrap());
+    let fl = rms(&floor);
+    assert!(floor.len() > 400, "{} held-out rows", floor.len());
+    // The capture noise of a row: 0.05 mm per coordinate, sqrt(2) 0.05 mm in the plane.
+    assert!((fl - 0.0707).abs() < 0.006, "floor {fl}");
+    assert_eq!(c.joint.used, Method::Joint, "{:?}", c.joint.warnings);
+    let j = model_errors(&c.joint.robot, &c.noisy);
+    let p = model_errors(&c.paper.robot, &c.noisy);
+    let before = rms(&model_errors(&RobotConfig::nominal(), &c.noisy));
+    let (d, se) = paired_difference(&j, &p);
+    println!(
+        "held-out rows {}: floor {fl:.4} mm, nominal {before:.4}, paper {:.4} ({:.3} x), joint {:.4} ({:.3} x), joint^2 - paper^2 {d:.2e} +- {se:.1e} mm^2",
+        floor.len(),
+        rms(&p),
+        rms(&p) / fl,
+        rms(&j),
+        rms(&j) / fl
+    );
+    assert!(before > 1.0, "nominal {before}");
+    assert!(rms(&j) <= 1.15 * fl, "joint {} mm, floor {fl} mm", rms(&j));
+    assert!(d <= 2.0 * se, "joint worse than paper: {d} +- {se} mm^2");
+}
+
+/// With three times the prototype's geometry deviations the parameters the paper does not
+/// free (B_i, l_CE, l_st) matter more, and the joint fit, which lets the leg parameters answer
+/// to the platform poses too, predicts the held-out rows and visits better than the two steps
+/// (by about 2 % of the row RMS; the gain varies from pose to pose, so it is 1.6 standard
+/// errors of the paired difference over 27 test visits, not more).
+#[test]
+fn joint_calibration_beats_the_two_steps_when_the_geometry_is_further_off() {
+    let c = case(3.0, false);
+    assert_eq!(c.joint.used, Method::Joint, "{:?}", c.joint.warnings);
+    let j = model_errors(&c.joint.robot, &c.noisy);
+    let p = model_errors(&c.paper.robot, &c.noisy);
+    let (d, se) = paired_difference(&j, &p);
+    println!(
+        "3x deviations: paper {:.4} mm, joint {:.4} mm, joint^2 - paper^2 {d:.2e} +- {se:.1e} mm^2",
+        rms(&p),
+        rms(&j)
+    );
+    assert!(d < -se, "joint {} mm, paper {} mm", rms(&j), rms(&p));
+    let (jt, pt) = (
+        c.joint.after.test.unwrap().pose.position_rms_mm,
+        c.joint.paper.test.unwrap().pose.position_rms_mm,
+    );
+    println!("per visit: joint {jt:.4} mm, paper {pt:.4} mm");
+    assert!(jt < pt, "per visit: joint {jt}, paper {pt}");
+}
+
+/// `Method::Paper` is the pure two steps: the calibrated robot is step 2's, the reported
+/// accuracy is the paper's, and no joint fit is run; with the default method the two steps are
+/// the same and reported beside the joint result.
+#[test]
+fn the_paper_method_keeps_the_two_steps() {
+    let c = prototype();
+    let (joint, paper) = (&c.joint, &c.paper);
+    assert_eq!(paper.used, Method::Paper);
+    assert!(paper.joint.is_none());
+    assert_eq!(paper.robot.legs, paper.step2.config.legs);
+    assert_eq!(paper.after, paper.paper);
+    assert_eq!(joint.step2.config.legs, paper.robot.legs);
+    assert_eq!(joint.paper, paper.paper);
+    // The joint fit starts at the two steps, lowers the training cost, and reports every
+    // parameter of both steps (psi, l_C and the map per leg, r_p and theta_p per joint) with
+    // an uncertainty.
+    let fit = &joint.joint.as_ref().unwrap().fit;
+    assert!(fit.converged && fit.rms_mm <= fit.start_rms_mm);
+    let per_leg = joint.step1[0].params.len();
+    assert_eq!(fit.params.len(), 3 * per_leg + 6);
+    assert!(fit.params.iter().all(|p| p.std.is_some_and(|s| s > 0.0)));
+}
+
+/// A noise-free recording of the paper's 189 calibration poses (one row each, the plant's
+/// static truth for the commanded motors: `TruthModel`).
+fn truth_recording(plant: &PlantConfig) -> Recording {
+    let nominal = RobotConfig::nominal();
+    let truth = pcr_plant::TruthModel::new(&nominal, plant).unwrap();
+    let model = Robot::nominal();
+    let set =
+        pcr_experiments::CalibrationSet::design(&model, &CalibrationOptions::default()).unwrap();
+    let mut rec = Recording {
+        columns: [
+            "t_s", "q1", "q2", "q3", "x_mm", "y_mm", "phi_deg", "m1x_mm", "m1y_mm", "m2x_mm",
+            "m2y_mm", "m3x_mm", "m3y_mm", "pose_id", "settled", "set",
+        ]
+        .map(String::from)
+        .to_vec(),
+        ..Recording::default()
+    };
+    for (k, p) in set.poses.iter().enumerate() {
+        let s = model.ik(&p.pose).unwrap();
+        let q: [i32; 3] =
+            std::array::from_fn(|i| model.kappa_to_steps(i, s.kappa[i]).unwrap().round() as i32);
+        let eq = truth.solve_steps(&q.map(f64::from)).unwrap();
+        let mut row = Row::new(0.02 * k as f64, q);
+        row.pose = [
+            Some(eq.pose[0]),
+            Some(eq.pose[1]),
+            Some(eq.pose[2].to_degrees()),
+        ];
+        row.m = eq.m.map(|m| [Some(m[0]), Some(m[1])]);
+        row.pose_id = Some(p.pose_id);
+        row.settled = Some(true);
+        row.set = Some(p.set);
+        rec.rows.push(row);
+    }
+    rec
+}
+
+/// What remains above the floor, split by cause on noise-free data (docs/calibration.md, "How
+/// close to the noise floor"): prints the held-out platform position RMS of the two steps, the
+/// joint refinement and the joint refinement of the extended set, for the prototype's geometry
+/// and map, the map alone, and the geometry alone with a linear map (function 2 forced).
+/// `cargo test -p pcr-integration-tests --test calibration_joint_floor -- --ignored --nocapture`
+#[test]
+#[ignore = "a measurement for the documentation, not a check"]
+fn model_error_breakdown() {
+    use pcr_calibration::calibrate::ParameterSet;
+    use pcr_robot::TendonMapKind;
+    let full = geometry_and_map_plant(1.0, false);
+    let mut map_only = full.clone();
+    map_only.geometry = PlantConfig::ideal().geometry;
+    let mut geometry_only = full.clone();
+    geometry_only.tendon_map.model = PlantConfig::ideal().tendon_map.model;
+    let cases = [
+        ("prototype geometry + tanh map", &full, None),
+        ("tanh map only", &map_only, None),
+        (
+            "geometry only, linear map",
+            &geometry_only,
+            Some(TendonMapKind::Affine),
+        ),
+    ];
+    for (name, plant, function) in cases {
+        let rec = truth_recording(plant);
+        let pos = |parameters| {
+            let opts = Options {
+                parameters,
+                function,
+                ..Options::default()
+            };
+            let cal = calibrate(&RobotConfig::nominal(), &rec, name, &opts).unwrap();
+            let joint = cal
+                .joint
+                .unwrap()
+                .accuracy
+                .test
+                .unwrap()
+                .pose
+                .position_rms_mm;
+            (
+                cal.paper.test.unwrap().pose.position_rms_mm,
+                joint,
+                cal.selected,
+            )
+        };
+        let (paper, joint, f) = pos(ParameterSet::Paper);
+        let (_, extended, _) = pos(ParameterSet::Extended);
+        println!(
+            "{name}: function {f}: two steps {paper:.4} mm, joint {joint:.4} mm, extended joint {extended:.4} mm"
+        );
+    }
+}
