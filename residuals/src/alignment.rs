@@ -221,7 +221,7 @@ fn align_series(ctx: &Context, si: usize) -> Timing {
     } else {
         0.0
     };
-    let p = paired_p(&at_declared, &at_estimate);
+    let p = crate::attribution::paired_p(&at_declared, &at_estimate, &vec![true; blocks.len()]);
     let departs = excess.abs() > bound && share >= crate::attribution::MIN_SHARE && p < ALPHA;
     out.estimated_s = Some(est);
     out.std_s = Some(std);
@@ -269,23 +269,6 @@ fn align_series(ctx: &Context, si: usize) -> Timing {
         };
     }
     out
-}
-
-/// One-sided paired t-test over the blocks that `b` is smaller than `a`.
-fn paired_p(a: &[f64], b: &[f64]) -> f64 {
-    use statrs::distribution::{ContinuousCDF, StudentsT};
-    let d: Vec<f64> = a.iter().zip(b).map(|(x, y)| x - y).collect();
-    let n = d.len();
-    if n < 3 {
-        return 1.0;
-    }
-    let m = d.iter().sum::<f64>() / n as f64;
-    let sd = (d.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt();
-    if sd == 0.0 {
-        return if m > 0.0 { 0.0 } else { 1.0 };
-    }
-    let t = m / (sd / (n as f64).sqrt());
-    StudentsT::new(0.0, 1.0, (n - 1) as f64).map_or(1.0, |dist| 1.0 - dist.cdf(t))
 }
 
 /// The drive delay a recording with a wrong declaration is analysed with: the largest whole

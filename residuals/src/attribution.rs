@@ -188,7 +188,7 @@ fn sse_per_block(ctx: &Context, idx: &[usize], delta: Option<&[[f64; 3]]>, nb: u
 }
 
 /// One-sided paired t-test over the held-out blocks that `b` is smaller than `a`.
-fn paired_p(a: &[f64], b: &[f64], held: &[bool]) -> f64 {
+pub(crate) fn paired_p(a: &[f64], b: &[f64], held: &[bool]) -> f64 {
     let d: Vec<f64> = a
         .iter()
         .zip(b)
