@@ -54,7 +54,9 @@ pub struct Timing {
     pub excess_s: Option<f64>,
     /// Share of the moving rows' residual above the capture noise that the data's delay explains
     /// against the declared one (a wrong declaration explains most of it; a delay that only
-    /// trades against an unexplained structure explains little).
+    /// trades against an unexplained structure explains little). Negative when the declared
+    /// delay fits better once the calibration parameters are refitted (the estimate's scan does
+    /// not refit them).
     pub explained_share: Option<f64>,
     /// One-sided p-value of the paired test over the blocks that the data's delay fits better
     /// than the declared one.
@@ -89,7 +91,7 @@ const FINE_STEP: f64 = 0.0005;
 const SIGMAS: f64 = 4.0;
 const MIN_DEPARTURE_PERIODS: f64 = 0.1;
 /// ... and when the data's delay explains at least this share of the moving rows' residual above
-/// the noise (the attribution's rule for a cause, `attribution::MIN_SHARE`), significantly over
+/// the noise (the attribution's rule for a cause, `scoring::MIN_SHARE`), significantly over
 /// the blocks (one-sided paired test below `ALPHA`).
 const ALPHA: f64 = 0.01;
 
@@ -221,8 +223,8 @@ fn align_series(ctx: &Context, si: usize) -> Timing {
     } else {
         0.0
     };
-    let p = crate::attribution::paired_p(&at_declared, &at_estimate, &vec![true; blocks.len()]);
-    let departs = excess.abs() > bound && share >= crate::attribution::MIN_SHARE && p < ALPHA;
+    let p = crate::scoring::paired_p(&at_declared, &at_estimate, &vec![true; blocks.len()]);
+    let departs = excess.abs() > bound && share >= crate::scoring::MIN_SHARE && p < ALPHA;
     out.estimated_s = Some(est);
     out.std_s = Some(std);
     out.excess_s = Some(excess);
@@ -234,12 +236,12 @@ fn align_series(ctx: &Context, si: usize) -> Timing {
         "declares no command delay (so 0 s)".to_string()
     };
     let shows = format!(
-        "the data show {:.4} +- {:.4} s ({} moving rows, {} blocks; against the declared delay it explains {:.0} % of their residual above the noise, p = {:.1e})",
+        "the data show {:.4} +- {:.4} s ({} moving rows, {} blocks; against the declared delay {}, p = {:.1e})",
         est,
         std,
         rows.len(),
         blocks.len(),
-        100.0 * share,
+        share_phrase(share),
         p
     );
     if departs && excess < 0.0 {
@@ -269,6 +271,19 @@ fn align_series(ctx: &Context, si: usize) -> Timing {
         };
     }
     out
+}
+
+/// The report's words for the share of the residual above the noise that the data's delay
+/// explains against the declared one.
+fn share_phrase(share: f64) -> String {
+    if share > 0.0 {
+        format!(
+            "it explains {:.0} % of their residual above the noise",
+            100.0 * share
+        )
+    } else {
+        "it explains none of their residual above the noise (with the calibration parameters refitted the declared delay fits as well or better)".to_string()
+    }
 }
 
 /// The drive delay a recording with a wrong declaration is analysed with: the largest whole
@@ -473,5 +488,12 @@ mod tests {
         assert_eq!(whole_cycles_within(0.0185, 0.004, 0.02), 0.02);
         // A measurement that leads by a cycle.
         assert_eq!(whole_cycles_within(-0.0195, 0.002, 0.02), -0.02);
+    }
+
+    #[test]
+    fn a_share_at_or_below_zero_is_said_as_none() {
+        assert!(share_phrase(0.231).contains("explains 23 %"));
+        assert!(share_phrase(-0.12).contains("explains none"));
+        assert!(!share_phrase(-0.12).contains('-'));
     }
 }

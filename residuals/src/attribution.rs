@@ -7,15 +7,19 @@
 //! again. When nothing more is significant, what remains is compared with the capture noise and
 //! the features it correlates with are named.
 
+use crate::acceptance::{accept, GN_STEPS};
 use crate::candidates::{self, Estimate, Fitted};
 use crate::context::{Context, Errors};
 use crate::features::{self, FeatureLink, Features};
 use crate::model::ExtendedModel;
+use crate::plausibility::unphysical;
+use crate::scoring::{Reference, Round};
 use crate::series::{Blocks, Series};
 use pcr_robot::RobotConfig;
 use rayon::prelude::*;
 use serde::Serialize;
-use statrs::distribution::{ContinuousCDF, StudentsT};
+
+pub use crate::scoring::{Score, MIN_SHARE};
 
 /// Settings of the attribution.
 #[derive(Debug, Clone, Serialize)]
@@ -55,36 +59,6 @@ impl Default for Options {
 
 /// Plot data of one feature: its name, the residual component, (feature value, residual).
 pub type FeaturePoints = (String, String, Vec<(f64, f64)>);
-
-/// How one candidate scored in one round.
-#[derive(Debug, Clone, Serialize)]
-pub struct Score {
-    /// Round (1-based).
-    pub round: usize,
-    /// Candidate name.
-    pub name: String,
-    /// Its parameters.
-    pub params: Vec<Estimate>,
-    /// Held-out RMS of the weighted residual before (the reference) and with the candidate, mm.
-    pub held_out_rms_before_mm: f64,
-    /// With the candidate, mm.
-    pub held_out_rms_after_mm: f64,
-    /// sqrt of the held-out mean-square reduction against the reference, mm (negative: it made
-    /// things worse). The reference of `geometry` is the model as it is; that of every effect is
-    /// the recalibration (`geometry`), so an effect is credited only with what it adds to it.
-    pub effect_mm: f64,
-    /// sqrt of the held-out mean-square reduction against the model as it is, mm: ranks the
-    /// significant candidates.
-    pub total_gain_mm: f64,
-    /// One-sided p-value of the paired held-out block test.
-    pub p_value: f64,
-    /// BIC(candidate) - BIC(reference) on the training rows.
-    pub delta_bic: f64,
-    /// Whether it passed every test.
-    pub significant: bool,
-    /// Why not, if not.
-    pub note: String,
-}
 
 /// An effect added to the model.
 #[derive(Debug, Clone, Serialize)]
@@ -176,42 +150,6 @@ pub enum AttributionError {
     Data(String),
 }
 
-fn sse_per_block(ctx: &Context, idx: &[usize], delta: Option<&[[f64; 3]]>, nb: usize) -> Vec<f64> {
-    let mut out = vec![0.0; nb];
-    for &i in idx {
-        let r = ctx.rows[i].r;
-        let d = delta.map_or([0.0; 3], |d| d[i]);
-        out[ctx.rows[i].block] +=
-            (r[0] - d[0]).powi(2) + (r[1] - d[1]).powi(2) + (r[2] - d[2]).powi(2);
-    }
-    out
-}
-
-/// One-sided paired t-test over the held-out blocks that `b` is smaller than `a`.
-pub(crate) fn paired_p(a: &[f64], b: &[f64], held: &[bool]) -> f64 {
-    let d: Vec<f64> = a
-        .iter()
-        .zip(b)
-        .zip(held)
-        .filter(|(_, h)| **h)
-        .map(|((x, y), _)| x - y)
-        .collect();
-    let n = d.len();
-    if n < 3 {
-        return 1.0;
-    }
-    let m = d.iter().sum::<f64>() / n as f64;
-    let sd = (d.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt();
-    if sd == 0.0 {
-        return if m > 0.0 { 0.0 } else { 1.0 };
-    }
-    let t = m / (sd / (n as f64).sqrt());
-    let Ok(dist) = StudentsT::new(0.0, 1.0, (n - 1) as f64) else {
-        return 1.0;
-    };
-    1.0 - dist.cdf(t)
-}
-
 fn mark(scores: &mut [Score], round: usize, name: &str, note: String) {
     if let Some(last) = scores
         .iter_mut()
@@ -221,86 +159,6 @@ fn mark(scores: &mut [Score], round: usize, name: &str, note: String) {
         last.significant = false;
         last.note = note;
     }
-}
-
-/// Puts an accepted candidate into the model for real: the linearised change, damped until the
-/// full model lowers the training error, re-linearised and refitted (Gauss-Newton) while that
-/// helps, then every effect's parameters refined together on the full model. `None` when the
-/// full model does not improve on the training rows.
-/// Smallest share of the held-out mean square above the capture noise that a candidate must
-/// explain to be claimed.
-pub const MIN_SHARE: f64 = 0.25;
-
-/// Largest number of Gauss-Newton steps when a candidate goes into the model.
-const GN_STEPS: usize = 10;
-
-fn accept<'a>(
-    config: &RobotConfig,
-    ctx: &Context<'a>,
-    first: Fitted,
-    series: &'a [Series],
-    blocks: &Blocks,
-    w_phi: f64,
-    progress: &crate::progress::ProgressSink,
-) -> Option<(RobotConfig, Context<'a>)> {
-    let name = first.name;
-    let start_sse = ctx.sse(&ctx.train(), None);
-    let mut cur: Option<(RobotConfig, Context<'a>, f64)> = None;
-    let mut step = Some(first);
-    // Damping carried from one step to the next (a step that needed 1/4 starts the next at 1/2).
-    let mut trust = 1.0f64;
-    for it in 0..GN_STEPS {
-        let Some(f) = step.take() else { break };
-        let (base_cfg, base_sse) = match &cur {
-            Some((c, _, s)) => (c.clone(), *s),
-            None => (config.clone(), start_sse),
-        };
-        let mut full = base_cfg.clone();
-        (f.change)(&mut full);
-        let mut improved = false;
-        let mut frac = trust;
-        while frac >= 1.0 / 16.0 {
-            let cand = crate::model::blend(&base_cfg, &full, frac);
-            let nctx = cand
-                .validate("extended robot")
-                .ok()
-                .and_then(|_| ExtendedModel::like(&cand, &ctx.model).ok())
-                .map(|m| Context::new(series, m, blocks, w_phi))
-                .filter(|n| n.rows.len() + 5 >= ctx.rows.len());
-            if let Some(nctx) = nctx {
-                let sse = nctx.sse(&nctx.train(), None);
-                if sse < base_sse {
-                    cur = Some((cand, nctx, sse));
-                    improved = true;
-                    break;
-                }
-            }
-            frac *= 0.5;
-        }
-        trust = (2.0 * frac).min(1.0);
-        progress.step();
-        if !improved || !candidates::iterable(name) || it + 1 == GN_STEPS {
-            break;
-        }
-        let (_, c, s) = cur.as_ref()?;
-        // Stop when the step gained less than 0.1 %.
-        if *s > 0.999 * base_sse {
-            break;
-        }
-        step = candidates::fit(name, c, &c.train());
-    }
-    let (cfg, nctx, sse) = cur?;
-    // Every effect's parameters together on the full model.
-    let refined = crate::refine::refine(&cfg, &ctx.model, series, blocks, w_phi, 3000);
-    if refined != cfg {
-        if let Ok(model) = ExtendedModel::like(&refined, &ctx.model) {
-            let rctx = Context::new(series, model, blocks, w_phi);
-            if rctx.rows.len() + 5 >= ctx.rows.len() && rctx.sse(&rctx.train(), None) < sse {
-                return Some((refined, rctx));
-            }
-        }
-    }
-    Some((cfg, nctx))
 }
 
 /// An effect's parameters as the configuration holds them now, with the uncertainties of the
@@ -379,190 +237,6 @@ fn effect_points(ctx: &Context, delta: &[[f64; 3]], test: &[usize]) -> Vec<(f64,
         .collect()
 }
 
-/// Why a model is not a physical explanation, if it is not: its geometry more than
-/// `max_geometry_change` (mm, deg) away from the drawing the analysis started from (the
-/// calibration parameters would then only mimic another cause), or springs, creep or a latency
-/// of the wrong sign.
-fn unphysical(
-    c: &RobotConfig,
-    current: &RobotConfig,
-    drawing: &RobotConfig,
-    opts: &Options,
-) -> Option<String> {
-    let lim = opts.max_geometry_change;
-    let params = |l: &pcr_robot::LegConfig| {
-        [
-            ("psi_deg", l.psi_deg),
-            ("l_c_mm", l.l_c_mm),
-            ("r_p_mm", l.r_p_mm),
-            ("theta_p_deg", l.theta_p_deg),
-            ("l_st_mm", l.l_st_mm),
-            ("r_base_mm", l.r_base_mm),
-            ("beta_deg", l.beta_deg),
-        ]
-    };
-    // How far beyond the bound a geometry is, summed over the parameters: a candidate may not
-    // push it further out (it may bring a geometry the calibration pushed out back).
-    let excess = |c: &RobotConfig| -> (f64, Vec<String>) {
-        let mut total = 0.0;
-        let mut far = Vec::new();
-        for i in 0..3 {
-            let (n, d) = (params(&c.legs[i]), params(&drawing.legs[i]));
-            for k in 0..n.len() {
-                let away = (n[k].1 - d[k].1).abs();
-                if away > lim {
-                    total += (away - lim).powi(2);
-                    far.push(format!("{}[{}] {:+.2}", n[k].0, i + 1, n[k].1 - d[k].1));
-                }
-            }
-        }
-        (total, far)
-    };
-    let (new_excess, far) = excess(c);
-    let (old_excess, _) = excess(current);
-    let mut why = Vec::new();
-    if new_excess > old_excess + 1e-9 {
-        why.push(format!(
-            "the geometry would leave the drawing ({}; more than {lim} mm or deg)",
-            far.join(", ")
-        ));
-    }
-    let e = &c.effects;
-    if let Some(f) = &e.frame {
-        // A registration off by more than this would be seen at once: 1 deg is 5 mm at the
-        // base points.
-        if f.dx_mm.hypot(f.dy_mm) > lim || f.dphi_deg.abs() > lim / 3.0 {
-            why.push(format!(
-                "a capture frame off by ({:.2}, {:.2}) mm and {:.2} deg",
-                f.dx_mm, f.dy_mm, f.dphi_deg
-            ));
-        }
-    }
-    if let Some(k) = &e.compliance {
-        if k.k_m_n_mm_per_rad < 0.0 || k.k_p_n_mm_per_rad < 0.0 {
-            why.push(format!(
-                "negative joint springs (k_M {:.1}, k_P {:.1} N mm/rad)",
-                k.k_m_n_mm_per_rad, k.k_p_n_mm_per_rad
-            ));
-        }
-    }
-    if let Some(cr) = &e.creep {
-        if cr.gain.iter().any(|g| *g < 0.0) {
-            why.push(format!(
-                "a tendon that shortens under load (creep gains {:?})",
-                cr.gain
-            ));
-        }
-    }
-    if let Some(l) = &e.latency {
-        if l.latency_s < -0.01 {
-            why.push(format!(
-                "the motion leads the command by {:.3} s",
-                -l.latency_s
-            ));
-        }
-    }
-    (!why.is_empty()).then(|| format!("unphysical: {}", why.join(", ")))
-}
-
-fn rms(sse: f64, n: usize) -> f64 {
-    (sse / n.max(1) as f64).sqrt()
-}
-
-/// Scores a fitted candidate against a reference (residual change `reference`, or none).
-#[allow(clippy::too_many_arguments)]
-fn score(
-    round: usize,
-    ctx: &Context,
-    f: &Fitted,
-    reference: Option<&[[f64; 3]]>,
-    ref_train_sse: f64,
-    ref_k: usize,
-    train: &[usize],
-    test: &[usize],
-    blocks: &Blocks,
-    opts: &Options,
-    n_candidates: usize,
-    geometry_gain_ms: Option<f64>,
-    geometry_significant: bool,
-    noise_ms: f64,
-) -> Score {
-    let nb = blocks.len();
-    let raw: f64 = sse_per_block(ctx, test, None, nb).iter().sum();
-    let a = sse_per_block(ctx, test, reference, nb);
-    let b = sse_per_block(ctx, test, Some(&f.delta), nb);
-    let (sa, sb): (f64, f64) = (a.iter().sum(), b.iter().sum());
-    let p = paired_p(&a, &b, &blocks.held_out);
-    let n = 3 * train.len();
-    let bic = |sse: f64, k: usize| {
-        n as f64 * (sse.max(1e-300) / n as f64).ln() + k as f64 * (n as f64).ln()
-    };
-    let delta_bic = bic(f.train_sse, ref_k + f.k) - bic(ref_train_sse, ref_k);
-    // Position part of the reduction, per row (mm^2): the weighted residual has three parts.
-    let red = (sa - sb) / test.len().max(1) as f64;
-    let effect_mm = red.signum() * red.abs().sqrt();
-    let alpha = opts.alpha / n_candidates.max(1) as f64;
-    let mut note = Vec::new();
-    if p >= alpha {
-        note.push(format!("p = {p:.2e} >= {alpha:.1e}"));
-    }
-    if effect_mm < opts.min_effect_mm {
-        note.push(format!(
-            "held-out gain {effect_mm:.4} mm < {} mm",
-            opts.min_effect_mm
-        ));
-    }
-    if delta_bic >= 0.0 {
-        note.push(format!("BIC does not improve ({delta_bic:+.1})"));
-    }
-    // A cause explains a good part of the structure it is tested on; a candidate that only
-    // projects a little of an unknown cause is not claimed.
-    let excess = sa / test.len().max(1) as f64 - noise_ms;
-    let share = if excess > 0.0 { red / excess } else { 0.0 };
-    if share < MIN_SHARE {
-        note.push(format!(
-            "explains {:.0} % of the structured residual (< {:.0} %)",
-            100.0 * share,
-            100.0 * MIN_SHARE
-        ));
-    }
-    // Parsimony: an effect that alone (without the recalibration) gains at least 90 % of what
-    // the recalibration gains, significantly, is the simpler explanation of the same residual.
-    if !note.is_empty() {
-        if let (Some(alone), Some(geo)) = (&f.alone, geometry_gain_ms) {
-            let c = sse_per_block(ctx, test, Some(alone), nb);
-            let raw_b = sse_per_block(ctx, test, None, nb);
-            let sc: f64 = c.iter().sum();
-            let gain = (raw - sc) / test.len().max(1) as f64;
-            let pa = paired_p(&raw_b, &c, &blocks.held_out);
-            if geometry_significant
-                && geo > 0.0
-                && gain >= 0.9 * geo
-                && pa < alpha
-                && gain.sqrt() >= opts.min_effect_mm
-            {
-                note.clear();
-            }
-        }
-    }
-    Score {
-        round,
-        name: f.name.to_string(),
-        params: f.params.clone(),
-        held_out_rms_before_mm: rms(sa, test.len()),
-        held_out_rms_after_mm: rms(sb, test.len()),
-        effect_mm,
-        total_gain_mm: {
-            let t = (raw - sb) / test.len().max(1) as f64;
-            t.signum() * t.abs().sqrt()
-        },
-        p_value: p,
-        delta_bic,
-        significant: note.is_empty(),
-        note: note.join("; "),
-    }
-}
-
 /// The residuals and features of a robot file on the series (no fitting): what `pcr residuals`
 /// writes as `residuals.csv`.
 pub fn residual_table(
@@ -625,7 +299,6 @@ fn attribute_from<'a>(
     opts: &Options,
 ) -> Result<Attribution, AttributionError> {
     let w_phi = ctx0.w_phi;
-    let mut config = start.clone();
     let (train0, test0) = (ctx0.train(), ctx0.test());
     if train0.len() < 20 || test0.is_empty() {
         return Err(AttributionError::Data(format!(
@@ -635,201 +308,368 @@ fn attribute_from<'a>(
         )));
     }
     let before = Errors::of(&ctx0, &test0);
-    // What the capture noise explains of a row's weighted mean square (mm^2).
-    let noise_ms = series
+    let set = Setting {
+        series,
+        blocks,
+        drawing,
+        opts,
+        w_phi,
+        noise_ms: capture_noise_ms(series, w_phi),
+    };
+    let first_residuals: Vec<f64> = ctx0.rows.iter().map(|r| r.r[0].hypot(r.r[1])).collect();
+    let mut search = Search {
+        config: start.clone(),
+        ctx: ctx0,
+        scores: Vec::new(),
+        added: Vec::new(),
+        effect_plots: Vec::new(),
+    };
+    for round in 1..=opts.max_rounds {
+        let fits = search.fit_and_score(round, &set);
+        if !search.add_best(round, fits, &set) {
+            break;
+        }
+    }
+    let Search {
+        config,
+        ctx,
+        scores,
+        mut added,
+        effect_plots,
+    } = search;
+    opts.progress.stage(0, "what remains", ctx.rows.len(), 0);
+    // The values the final model holds (joint refinements move earlier effects too).
+    for a in &mut added {
+        a.params = current_params(&config, &a.name, &a.params);
+        a.uncertainty = a.params.iter().map(|p| (p.name.clone(), p.std)).collect();
+    }
+    let rest = Remainder::of(&ctx, &first_residuals, set.noise_ms, opts);
+    Ok(Attribution {
+        timing: Vec::new(),
+        timing_finding: None,
+        before,
+        after: rest.after,
+        verdict: Verdict::of(&added, rest.remains),
+        effects: added,
+        candidates: scores,
+        noise: series
+            .iter()
+            .find_map(|s| s.row_noise)
+            .map(|n| [n[0], n[1], n[2].to_degrees()]),
+        remaining_rms_mm: rest.remaining_ms.sqrt(),
+        remaining_excess_mm: rest.excess_mm,
+        correlated_features: if rest.remains {
+            rest.structured
+        } else {
+            Vec::new()
+        },
+        rows: [ctx.train().len(), ctx.test().len()],
+        blocks: [
+            blocks.held_out.iter().filter(|h| !**h).count(),
+            blocks.held_out.iter().filter(|h| **h).count(),
+        ],
+        options: opts.clone(),
+        robot: config,
+        effect_points: effect_plots,
+        residual_time: rest.residual_time,
+        feature_points: rest.feature_points,
+    })
+}
+
+/// What every round shares: the data, the drawing, the settings.
+struct Setting<'a, 'o> {
+    series: &'a [Series],
+    blocks: &'o Blocks,
+    /// The robot file the analysis began with.
+    drawing: &'o RobotConfig,
+    opts: &'o Options,
+    /// Weight of the orientation in the residual, mm/rad.
+    w_phi: f64,
+    /// What the capture noise explains of a row's weighted mean square, mm^2.
+    noise_ms: f64,
+}
+
+/// What the capture noise explains of a row's weighted mean square, mm^2 (0 without settled
+/// rows to measure it on).
+fn capture_noise_ms(series: &[Series], w_phi: f64) -> f64 {
+    series
         .iter()
         .find_map(|s| s.row_noise)
-        .map_or(0.0, |n| n[0] * n[0] + n[1] * n[1] + (w_phi * n[2]).powi(2));
-    let mut ctx = ctx0;
-    let mut scores = Vec::new();
-    let mut added: Vec<Added> = Vec::new();
-    let mut used: Vec<String> = Vec::new();
-    let mut effect_plots: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
-    let first_residuals: Vec<f64> = ctx.rows.iter().map(|r| r.r[0].hypot(r.r[1])).collect();
-    for round in 1..=opts.max_rounds {
+        .map_or(0.0, |n| n[0] * n[0] + n[1] * n[1] + (w_phi * n[2]).powi(2))
+}
+
+/// The search between rounds: the model as it stands and what was found so far.
+struct Search<'a> {
+    config: RobotConfig,
+    /// The model's residuals on the series.
+    ctx: Context<'a>,
+    /// Every candidate's score in every round.
+    scores: Vec<Score>,
+    /// Effects added, in order.
+    added: Vec<Added>,
+    /// Per added effect, its plot data ([`effect_points`]).
+    effect_plots: Vec<(String, Vec<(f64, f64)>)>,
+}
+
+/// An effect the full model confirmed.
+struct Confirmed<'a> {
+    config: RobotConfig,
+    ctx: Context<'a>,
+    added: Added,
+    points: Vec<(f64, f64)>,
+}
+
+impl<'a> Search<'a> {
+    /// One round's candidates fitted on the training rows (in parallel; each fit is
+    /// deterministic) and scored on the held-out rows, best total gain first. `geometry` is
+    /// scored first: the parsimony rule of the effects needs its verdict.
+    fn fit_and_score(&mut self, round: usize, set: &Setting) -> Vec<(Fitted, Score)> {
+        let ctx = &self.ctx;
         let (train, test) = (ctx.train(), ctx.test());
-        let names: Vec<&String> = opts
+        let names: Vec<&String> = set
+            .opts
             .candidates
             .iter()
-            .filter(|n| !used.contains(n) || *n == "periodic")
+            .filter(|n| *n == "periodic" || !self.added.iter().any(|a| &a.name == *n))
             .collect();
         // The reference for the effects: the recalibration (geometry) fit; for geometry itself,
         // the model as it is.
-        let mut geo = candidates::geometry(&ctx, &train);
+        let mut geo = candidates::geometry(ctx, &train);
         // A recalibration that would leave the drawing only mimics another cause: it is then no
         // reference (the effects are measured against the model as it is).
         let geo_physical = geo.as_ref().is_some_and(|g| {
-            let mut probe = config.clone();
+            let mut probe = self.config.clone();
             (g.change)(&mut probe);
-            unphysical(&probe, &config, drawing, opts).is_none()
+            unphysical(&probe, &self.config, set.drawing, set.opts).is_none()
         });
-        let reference = geo.as_ref().filter(|_| geo_physical);
-        let geo_delta = reference.map(|g| g.delta.clone());
-        let geo_sse = reference.map_or(ctx.sse(&train, None), |g| g.train_sse);
-        let geo_k = reference.map_or(0, |g| g.k);
-        let geo_gain_ms = geo_delta
+        let geo_delta = geo
             .as_ref()
-            .map(|d| (ctx.sse(&test, None) - ctx.sse(&test, Some(d))) / test.len().max(1) as f64);
-        let mut fits: Vec<(Fitted, Score)> = Vec::new();
-        // Every candidate fitted (in parallel; each fit is deterministic).
-        opts.progress
+            .filter(|_| geo_physical)
+            .map(|g| (g.delta.clone(), g.train_sse, g.k));
+        let mut effect_reference = Reference {
+            delta: geo_delta.as_ref().map(|g| g.0.as_slice()),
+            train_sse: geo_delta
+                .as_ref()
+                .map_or_else(|| ctx.sse(&train, None), |g| g.1),
+            k: geo_delta.as_ref().map_or(0, |g| g.2),
+            geometry_gain_ms: geo_delta.as_ref().map(|g| {
+                (ctx.sse(&test, None) - ctx.sse(&test, Some(&g.0))) / test.len().max(1) as f64
+            }),
+            geometry_significant: false,
+        };
+        set.opts
+            .progress
             .stage(round, "fitting candidates", ctx.rows.len(), names.len());
         let fitted_all: Vec<Option<Fitted>> = names
             .par_iter()
             .map(|name| {
                 let f = (name.as_str() != "geometry")
-                    .then(|| candidates::fit(name, &ctx, &train))
+                    .then(|| candidates::fit(name, ctx, &train))
                     .flatten();
-                opts.progress.step();
+                set.opts.progress.step();
                 f
             })
             .collect();
-        // `geometry` is scored first: the parsimony rule of the effects needs its verdict.
-        let mut geo_significant = false;
+        let scoring = Round {
+            round,
+            ctx,
+            train: &train,
+            test: &test,
+            blocks: set.blocks,
+            opts: set.opts,
+            n_candidates: names.len(),
+            noise_ms: set.noise_ms,
+        };
+        let mut fits: Vec<(Fitted, Score)> = Vec::new();
         for (name, pre) in names.iter().zip(fitted_all) {
             let fitted = if name.as_str() == "geometry" {
                 geo.take()
             } else {
                 pre
             };
-            let Some(f) = fitted else {
+            let Some(f) = fitted.filter(within_linearisation) else {
                 continue;
             };
-            // A linearised change of more than 20 mm on a row is outside the linearisation.
-            if f.delta
-                .iter()
-                .any(|d| !(d[0].hypot(d[1]) < 20.0 && d[2].abs() < 20.0))
-            {
-                continue;
-            }
             let s = if f.name == "geometry" {
-                score(
-                    round,
-                    &ctx,
-                    &f,
-                    None,
-                    ctx.sse(&train, None),
-                    0,
-                    &train,
-                    &test,
-                    blocks,
-                    opts,
-                    names.len(),
-                    None,
-                    false,
-                    noise_ms,
-                )
+                let s = scoring.score(&f, &Reference::model_as_is(ctx, &train));
+                effect_reference.geometry_significant = s.significant;
+                s
             } else {
-                score(
-                    round,
-                    &ctx,
-                    &f,
-                    geo_delta.as_deref(),
-                    geo_sse,
-                    geo_k,
-                    &train,
-                    &test,
-                    blocks,
-                    opts,
-                    names.len(),
-                    geo_gain_ms,
-                    geo_significant,
-                    noise_ms,
-                )
+                scoring.score(&f, &effect_reference)
             };
-            if f.name == "geometry" {
-                geo_significant = s.significant;
-            }
-            scores.push(s.clone());
+            self.scores.push(s.clone());
             fits.push((f, s));
         }
-        // The best significant candidate whose full model confirms the gain.
         fits.sort_by(|a, b| b.1.total_gain_mm.total_cmp(&a.1.total_gain_mm));
-        let mut accepted = false;
+        fits
+    }
+
+    /// Adds the best significant candidate whose full model confirms its gain; marks the ones
+    /// it does not confirm. False when none is added (the search ends).
+    fn add_best(
+        &mut self,
+        round: usize,
+        fits: Vec<(Fitted, Score)>,
+        set: &Setting<'a, '_>,
+    ) -> bool {
+        let test = self.ctx.test();
         for (f, s) in fits.into_iter().filter(|(_, s)| s.significant) {
             let name = f.name;
-            let points = effect_points(&ctx, &f.delta, &test);
-            opts.progress.stage(
-                round,
-                &format!("adding {name} to the model"),
-                ctx.rows.len(),
-                GN_STEPS + 1,
-            );
-            let Some((next, nctx)) =
-                accept(&config, &ctx, f, series, blocks, w_phi, &opts.progress)
-            else {
-                mark(
-                    &mut scores,
-                    round,
-                    name,
-                    "the full model does not lower the training error".into(),
-                );
-                continue;
-            };
-            // The model it makes, converged, must be physical: its geometry near the drawing, its
-            // springs and creep positive, its frame small.
-            if let Some(why) = unphysical(&next, &config, drawing, opts) {
-                mark(&mut scores, round, name, why);
-                continue;
+            match self.confirm(round, f, &s, &test, set) {
+                Ok(c) => {
+                    self.effect_plots.push((name.to_string(), c.points));
+                    self.added.push(c.added);
+                    self.config = c.config;
+                    self.ctx = c.ctx;
+                    return true;
+                }
+                Err(why) => mark(&mut self.scores, round, name, why),
             }
-            let ntest = nctx.test();
-            let old = ctx.sse(&test, None) / test.len() as f64;
-            let new = nctx.sse(&ntest, None) / ntest.len().max(1) as f64;
-            // The full model must keep at least half the linearised held-out gain.
-            let target = s.held_out_rms_after_mm.powi(2);
-            if ntest.len() + 5 < test.len() || new >= old || old - new < 0.5 * (old - target) {
-                mark(
-                    &mut scores,
-                    round,
-                    name,
-                    format!(
-                        "the full model does not confirm the gain (held-out mean square {old:.5} -> {new:.5} mm^2, linearised {target:.5})"
-                    ),
-                );
-                continue;
-            }
-            used.push(name.to_string());
-            effect_plots.push((name.to_string(), points));
-            added.push(Added {
-                name: name.to_string(),
-                description: candidates::describe(name).to_string(),
-                params: s.params.clone(),
-                uncertainty: s.params.iter().map(|p| (p.name.clone(), p.std)).collect(),
-                evidence: s.clone(),
-                held_out_after: Errors::of(&nctx, &ntest),
-            });
-            config = next;
-            ctx = nctx;
-            accepted = true;
-            break;
         }
-        if !accepted {
-            break;
+        false
+    }
+
+    /// Puts a significant candidate into the model ([`accept`]) and checks the result: the full
+    /// model must lower the training error, be physical (its geometry near the drawing, its
+    /// springs and creep positive, its frame small) and keep at least half the linearised
+    /// held-out gain. `Err`: why not.
+    fn confirm(
+        &self,
+        round: usize,
+        f: Fitted,
+        s: &Score,
+        test: &[usize],
+        set: &Setting<'a, '_>,
+    ) -> Result<Confirmed<'a>, String> {
+        let name = f.name;
+        let points = effect_points(&self.ctx, &f.delta, test);
+        set.opts.progress.stage(
+            round,
+            &format!("adding {name} to the model"),
+            self.ctx.rows.len(),
+            GN_STEPS + 1,
+        );
+        let (config, ctx) = accept(
+            &self.config,
+            &self.ctx,
+            f,
+            set.series,
+            set.blocks,
+            set.w_phi,
+            &set.opts.progress,
+        )
+        .ok_or_else(|| "the full model does not lower the training error".to_string())?;
+        if let Some(why) = unphysical(&config, &self.config, set.drawing, set.opts) {
+            return Err(why);
         }
+        let ntest = ctx.test();
+        let old = self.ctx.sse(test, None) / test.len() as f64;
+        let new = ctx.sse(&ntest, None) / ntest.len().max(1) as f64;
+        let target = s.held_out_rms_after_mm.powi(2);
+        if ntest.len() + 5 < test.len() || new >= old || old - new < 0.5 * (old - target) {
+            return Err(format!(
+                "the full model does not confirm the gain (held-out mean square {old:.5} -> {new:.5} mm^2, linearised {target:.5})"
+            ));
+        }
+        let added = Added {
+            name: name.to_string(),
+            description: candidates::describe(name).to_string(),
+            params: s.params.clone(),
+            uncertainty: s.params.iter().map(|p| (p.name.clone(), p.std)).collect(),
+            evidence: s.clone(),
+            held_out_after: Errors::of(&ctx, &ntest),
+        };
+        Ok(Confirmed {
+            config,
+            ctx,
+            added,
+            points,
+        })
     }
-    let (train, test) = (ctx.train(), ctx.test());
-    opts.progress.stage(0, "what remains", ctx.rows.len(), 0);
-    let after = Errors::of(&ctx, &test);
-    // The values the final model holds (joint refinements move earlier effects too).
-    for a in &mut added {
-        a.params = current_params(&config, &a.name, &a.params);
-        a.uncertainty = a.params.iter().map(|p| (p.name.clone(), p.std)).collect();
-    }
-    // What remains: against the noise, and the features it follows.
-    let noise = series.iter().find_map(|s| s.row_noise);
-    let remaining_ms = ctx.sse(&test, None) / test.len().max(1) as f64;
-    let excess = (remaining_ms - noise_ms).max(0.0).sqrt();
-    let feats = Features::of(&ctx);
-    let links = features::links(&ctx, &feats, &train, &test);
-    let structured: Vec<FeatureLink> = links
-        .into_iter()
-        .filter(|l| l.held_out_r2 > 0.05)
-        .take(6)
-        .collect();
-    let remains = excess > opts.min_effect_mm.max(0.25 * noise_ms.sqrt()) && !structured.is_empty();
-    let step = test.len().div_ceil(4000).max(1);
-    let residual_time: Vec<(f64, f64, f64)> = test
+}
+
+/// A linearised change of more than 20 mm (or 20 weighted mm of orientation) on a row is
+/// outside the linearisation: such a fit is not scored.
+fn within_linearisation(f: &Fitted) -> bool {
+    f.delta
         .iter()
+        .all(|d| d[0].hypot(d[1]) < 20.0 && d[2].abs() < 20.0)
+}
+
+impl Verdict {
+    /// The verdict from the effects added and whether a structure remains. A refit of the
+    /// calibration parameters (geometry, tendon map) absorbs, it does not explain: the verdict
+    /// counts physical effects.
+    fn of(added: &[Added], remains: bool) -> Verdict {
+        let physical = added
+            .iter()
+            .any(|a| !matches!(a.name.as_str(), "geometry" | "tendon_map"));
+        match (physical, remains) {
+            (_, false) => Verdict::Explained,
+            (true, true) => Verdict::PartlyExplained,
+            (false, true) => Verdict::Unexplained,
+        }
+    }
+}
+
+/// What remains after the last round: against the noise, and the features it follows.
+struct Remainder {
+    /// Held-out errors of the final model.
+    after: Errors,
+    /// Held-out weighted mean square per row, mm^2.
+    remaining_ms: f64,
+    /// The part of its RMS above the noise, mm.
+    excess_mm: f64,
+    /// Features it correlates with on held-out rows (R^2 > 0.05), at most six, strongest first.
+    structured: Vec<FeatureLink>,
+    /// Whether a structure worth claiming remains.
+    remains: bool,
+    residual_time: Vec<(f64, f64, f64)>,
+    feature_points: Vec<FeaturePoints>,
+}
+
+impl Remainder {
+    fn of(ctx: &Context, first_residuals: &[f64], noise_ms: f64, opts: &Options) -> Remainder {
+        let (train, test) = (ctx.train(), ctx.test());
+        let remaining_ms = ctx.sse(&test, None) / test.len().max(1) as f64;
+        let excess_mm = (remaining_ms - noise_ms).max(0.0).sqrt();
+        let feats = Features::of(ctx);
+        let structured: Vec<FeatureLink> = features::links(ctx, &feats, &train, &test)
+            .into_iter()
+            .filter(|l| l.held_out_r2 > 0.05)
+            .take(6)
+            .collect();
+        let remains =
+            excess_mm > opts.min_effect_mm.max(0.25 * noise_ms.sqrt()) && !structured.is_empty();
+        let step = test.len().div_ceil(4000).max(1);
+        let plotted = if remains { 3 } else { 0 };
+        Remainder {
+            after: Errors::of(ctx, &test),
+            remaining_ms,
+            excess_mm,
+            residual_time: residual_over_time(ctx, &test, first_residuals, step),
+            feature_points: feature_plots(
+                ctx,
+                &feats,
+                structured.iter().take(plotted),
+                &test,
+                step,
+            ),
+            structured,
+            remains,
+        }
+    }
+}
+
+/// Every `step`-th held-out row: its time from the start of its recording (s) and its position
+/// residual before the first round and now, mm.
+fn residual_over_time(
+    ctx: &Context,
+    test: &[usize],
+    first_residuals: &[f64],
+    step: usize,
+) -> Vec<(f64, f64, f64)> {
+    test.iter()
         .step_by(step)
         .map(|&i| {
             let row = &ctx.rows[i];
@@ -841,10 +681,18 @@ fn attribute_from<'a>(
                 row.r[0].hypot(row.r[1]),
             )
         })
-        .collect();
-    let feature_points: Vec<FeaturePoints> = structured
-        .iter()
-        .take(if remains { 3 } else { 0 })
+        .collect()
+}
+
+/// (feature value, residual component) on every `step`-th held-out row, per linked feature.
+fn feature_plots<'l>(
+    ctx: &Context,
+    feats: &Features,
+    links: impl Iterator<Item = &'l FeatureLink>,
+    test: &[usize],
+    step: usize,
+) -> Vec<FeaturePoints> {
+    links
         .filter_map(|l| {
             let j = feats.names.iter().position(|n| *n == l.feature)?;
             let c = ["x", "y", "phi"].iter().position(|n| *n == l.component)?;
@@ -857,38 +705,5 @@ fn attribute_from<'a>(
                     .collect(),
             ))
         })
-        .collect();
-    // A refit of the calibration parameters (geometry, tendon map) absorbs, it does not
-    // explain: the verdict counts physical effects.
-    let physical = added
-        .iter()
-        .any(|a| !matches!(a.name.as_str(), "geometry" | "tendon_map"));
-    let verdict = match (physical, remains) {
-        (_, false) => Verdict::Explained,
-        (true, true) => Verdict::PartlyExplained,
-        (false, true) => Verdict::Unexplained,
-    };
-    Ok(Attribution {
-        timing: Vec::new(),
-        timing_finding: None,
-        before,
-        after,
-        effects: added,
-        candidates: scores,
-        verdict,
-        noise: noise.map(|n| [n[0], n[1], n[2].to_degrees()]),
-        remaining_rms_mm: remaining_ms.sqrt(),
-        remaining_excess_mm: excess,
-        correlated_features: if remains { structured } else { Vec::new() },
-        rows: [train.len(), test.len()],
-        blocks: [
-            blocks.held_out.iter().filter(|h| !**h).count(),
-            blocks.held_out.iter().filter(|h| **h).count(),
-        ],
-        options: opts.clone(),
-        robot: config,
-        effect_points: effect_plots,
-        residual_time,
-        feature_points,
-    })
+        .collect()
 }

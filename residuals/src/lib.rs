@@ -6,6 +6,7 @@
 //! Like the calibration, this crate reads recordings and robot files only: it knows nothing of
 //! the simulated plant whose effects its tests try to find.
 
+mod acceptance;
 pub mod alignment;
 pub mod attribution;
 pub mod candidates;
@@ -13,9 +14,11 @@ pub mod context;
 pub mod features;
 pub mod linear;
 pub mod model;
+mod plausibility;
 pub mod progress;
 pub mod refine;
 pub mod report;
+pub mod scoring;
 pub mod series;
 
 pub use attribution::{attribute, Attribution, Options, Verdict};

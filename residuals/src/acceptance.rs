@@ -1,0 +1,85 @@
+//! Putting an accepted candidate into the model for real: its linearised change is damped
+//! until the full (non-linearised) model lowers the training error, re-linearised and refitted
+//! (Gauss-Newton) while that helps, and then every effect's parameters are refined together.
+
+use crate::candidates::{self, Fitted};
+use crate::context::Context;
+use crate::model::ExtendedModel;
+use crate::series::{Blocks, Series};
+use pcr_robot::RobotConfig;
+
+/// Largest number of Gauss-Newton steps when a candidate goes into the model.
+pub(crate) const GN_STEPS: usize = 10;
+
+/// Puts an accepted candidate into the model for real: the linearised change, damped until the
+/// full model lowers the training error, re-linearised and refitted (Gauss-Newton) while that
+/// helps, then every effect's parameters refined together on the full model. `None` when the
+/// full model does not improve on the training rows.
+pub(crate) fn accept<'a>(
+    config: &RobotConfig,
+    ctx: &Context<'a>,
+    first: Fitted,
+    series: &'a [Series],
+    blocks: &Blocks,
+    w_phi: f64,
+    progress: &crate::progress::ProgressSink,
+) -> Option<(RobotConfig, Context<'a>)> {
+    let name = first.name;
+    let start_sse = ctx.sse(&ctx.train(), None);
+    let mut cur: Option<(RobotConfig, Context<'a>, f64)> = None;
+    let mut step = Some(first);
+    // Damping carried from one step to the next (a step that needed 1/4 starts the next at 1/2).
+    let mut trust = 1.0f64;
+    for it in 0..GN_STEPS {
+        let Some(f) = step.take() else { break };
+        let (base_cfg, base_sse) = match &cur {
+            Some((c, _, s)) => (c.clone(), *s),
+            None => (config.clone(), start_sse),
+        };
+        let mut full = base_cfg.clone();
+        (f.change)(&mut full);
+        let mut improved = false;
+        let mut frac = trust;
+        while frac >= 1.0 / 16.0 {
+            let cand = crate::model::blend(&base_cfg, &full, frac);
+            let nctx = cand
+                .validate("extended robot")
+                .ok()
+                .and_then(|_| ExtendedModel::like(&cand, &ctx.model).ok())
+                .map(|m| Context::new(series, m, blocks, w_phi))
+                .filter(|n| n.rows.len() + 5 >= ctx.rows.len());
+            if let Some(nctx) = nctx {
+                let sse = nctx.sse(&nctx.train(), None);
+                if sse < base_sse {
+                    cur = Some((cand, nctx, sse));
+                    improved = true;
+                    break;
+                }
+            }
+            frac *= 0.5;
+        }
+        trust = (2.0 * frac).min(1.0);
+        progress.step();
+        if !improved || !candidates::iterable(name) || it + 1 == GN_STEPS {
+            break;
+        }
+        let (_, c, s) = cur.as_ref()?;
+        // Stop when the step gained less than 0.1 %.
+        if *s > 0.999 * base_sse {
+            break;
+        }
+        step = candidates::fit(name, c, &c.train());
+    }
+    let (cfg, nctx, sse) = cur?;
+    // Every effect's parameters together on the full model.
+    let refined = crate::refine::refine(&cfg, &ctx.model, series, blocks, w_phi, 3000);
+    if refined != cfg {
+        if let Ok(model) = ExtendedModel::like(&refined, &ctx.model) {
+            let rctx = Context::new(series, model, blocks, w_phi);
+            if rctx.rows.len() + 5 >= ctx.rows.len() && rctx.sse(&rctx.train(), None) < sse {
+                return Some((refined, rctx));
+            }
+        }
+    }
+    Some((cfg, nctx))
+}
