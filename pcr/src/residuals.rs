@@ -104,8 +104,10 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             );
         }
     }
+    let progress = ProgressDisplay::new();
     let start = load_robot(a.robot.as_deref())?;
     let drawing = start.clone();
+    progress.sink.stage(0, "reading the recordings", 0, 0);
     let data = read_all(&a.data)?;
     let holdout = read_all(&a.holdout)?;
     // Calibrate first on the static poses of the data (never of the holdout).
@@ -118,19 +120,25 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         match with_statics {
             Some((rec, s)) => {
                 let sd = StaticData::from_recording(rec, &s.origin, 1, 1.0 / 3.0)?;
+                progress.sink.stage(
+                    0,
+                    &format!("calibrating on the static poses of {}", s.origin),
+                    0,
+                    0,
+                );
                 let cal = calibrate::calibrate_data(&start, &sd, &CalOptions::default()).context(
                     "calibration before the residual analysis (--no-calibrate skips it)",
                 )?;
-                eprintln!(
+                progress.say(&format!(
                     "calibrated on {}: function {}, platform position RMS on its test poses {:.3} mm",
                     s.origin,
                     cal.selected,
                     cal.after.test.map_or(f64::NAN, |t| t.pose.position_rms_mm)
-                );
+                ));
                 cal.robot
             }
             None => {
-                eprintln!("no static poses in --data: the robot file is used as it is");
+                progress.say("no static poses in --data: the robot file is used as it is");
                 start
             }
         }
@@ -153,12 +161,15 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             a.candidates.clone()
         },
         exact: a.exact,
-        progress: progress_bar(),
+        progress: progress.sink.clone(),
         ..Options::default()
     };
     if let Some(dir) = &a.report {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
         let p = dir.join("residuals_before.csv");
+        progress
+            .sink
+            .stage(0, "writing the starting model's residuals", 0, 0);
         let mut f = std::io::BufWriter::new(
             std::fs::File::create(&p).with_context(|| format!("cannot write {}", p.display()))?,
         );
@@ -166,9 +177,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     }
     let wall = std::time::Instant::now();
     let res = attribute(&robot, &drawing, &series, &blocks, &opts);
-    if let Some(p) = &opts.progress.0 {
-        p.stage(0, "done", 0, 0);
-    }
+    progress.done();
     let res = res?;
     eprintln!("analysed in {:.2} s", wall.elapsed().as_secs_f64());
     for t in &res.timing {
@@ -246,10 +255,6 @@ struct Bar(ProgressBar);
 
 impl pcr_residuals::Progress for Bar {
     fn stage(&self, round: usize, what: &str, rows: usize, steps: usize) {
-        if what == "done" {
-            self.0.finish_and_clear();
-            return;
-        }
         let template = if steps == 0 {
             "{spinner} {msg} ({elapsed})"
         } else {
@@ -267,7 +272,12 @@ impl pcr_residuals::Progress for Bar {
         } else {
             format!("round {round}: ")
         };
-        self.0.set_message(format!("{round}{what}, {rows} rows"));
+        let rows = if rows == 0 {
+            String::new()
+        } else {
+            format!(", {rows} rows")
+        };
+        self.0.set_message(format!("{round}{what}{rows}"));
     }
 
     fn step(&self) {
@@ -275,13 +285,44 @@ impl pcr_residuals::Progress for Bar {
     }
 }
 
-/// A progress bar for the attribution, or none when stderr is not a terminal.
-fn progress_bar() -> pcr_residuals::ProgressSink {
-    use std::io::IsTerminal;
-    if !std::io::stderr().is_terminal() {
-        return pcr_residuals::ProgressSink::default();
+/// What `pcr residuals` shows while it works: a progress bar on stderr (reading, calibrating,
+/// then the attribution's candidates, rounds and rows) when stderr is a terminal, nothing
+/// otherwise; its messages are printed above the bar.
+struct ProgressDisplay {
+    /// What the attribution reports to.
+    sink: pcr_residuals::ProgressSink,
+    bar: Option<ProgressBar>,
+}
+
+impl ProgressDisplay {
+    fn new() -> ProgressDisplay {
+        use std::io::IsTerminal;
+        if !std::io::stderr().is_terminal() {
+            return ProgressDisplay {
+                sink: pcr_residuals::ProgressSink::default(),
+                bar: None,
+            };
+        }
+        let pb = ProgressBar::new(0);
+        pb.enable_steady_tick(std::time::Duration::from_millis(100));
+        ProgressDisplay {
+            sink: pcr_residuals::ProgressSink::new(std::sync::Arc::new(Bar(pb.clone()))),
+            bar: Some(pb),
+        }
     }
-    let pb = ProgressBar::new(0);
-    pb.enable_steady_tick(std::time::Duration::from_millis(100));
-    pcr_residuals::ProgressSink::new(std::sync::Arc::new(Bar(pb)))
+
+    /// A line on stderr, above the bar if there is one.
+    fn say(&self, line: &str) {
+        match &self.bar {
+            Some(b) => b.suspend(|| eprintln!("{line}")),
+            None => eprintln!("{line}"),
+        }
+    }
+
+    /// Clears the bar.
+    fn done(&self) {
+        if let Some(b) = &self.bar {
+            b.finish_and_clear();
+        }
+    }
 }
