@@ -1,4 +1,8 @@
-//! Integration tests live in `tests/tests/`; this library holds what they share.
+//! Integration tests live in `tests/tests/`; this library holds what they share: the chain's
+//! binaries, configurations and checkers below, and [`plant_recordings`] (the simulated plant's
+//! recordings for the analysis tests).
+
+pub mod plant_recordings;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;

@@ -11,8 +11,9 @@
 
 use pcr_calibration::calibrate::{calibrate, Calibration, Method, Options};
 use pcr_calibration::step2::predict_pose;
-use pcr_experiments::{
-    run_in_process, CalibrationOptions, Design, RunSetup, StaticDesign, Tolerances, VisitTiming,
+use pcr_experiments::{CalibrationOptions, Design, VisitTiming};
+use pcr_integration_tests::plant_recordings::{
+    calibration_visits, empty_static_recording, geometry_and_map_plant, record,
 };
 use pcr_kinematics::Robot;
 use pcr_plant::PlantConfig;
@@ -20,64 +21,23 @@ use pcr_recording::{Recording, Row, Split};
 use pcr_robot::RobotConfig;
 use std::sync::OnceLock;
 
-/// The plant with the prototype's geometry deviations scaled by `scale` and its tendon map;
-/// every other effect off; capture noise (0.05 mm, 0.05 deg per coordinate) on or off.
-fn geometry_and_map_plant(scale: f64, noise: bool) -> PlantConfig {
-    let proto = PlantConfig::prototype();
-    let mut p = PlantConfig::ideal();
-    p.geometry = proto.geometry;
-    let g = &mut p.geometry;
-    for d in [
-        &mut g.d_r_base_mm,
-        &mut g.d_beta_deg,
-        &mut g.d_psi_deg,
-        &mut g.d_l_c_mm,
-        &mut g.d_l_ce_mm,
-        &mut g.d_l_st_mm,
-        &mut g.d_r_p_mm,
-        &mut g.d_theta_p_deg,
-    ] {
-        d.iter_mut().for_each(|v| *v *= scale);
-    }
-    p.tendon_map = proto.tendon_map;
-    p.capture.noise = noise;
-    p
-}
-
 /// The paper's calibration set with 9 points per scaled boundary (81 poses, 3 per group held
 /// out: 54 train, 27 test), 0.4 s of settled rows per visit.
 fn design() -> Design {
-    let cal = StaticDesign::calibration(
-        &Robot::nominal(),
-        &CalibrationOptions {
-            points: 9,
-            test_per_group: 3,
-            ..CalibrationOptions::default()
-        },
+    calibration_visits(
+        9,
+        3,
         VisitTiming {
             speed_mm_s: 40.0,
             settle_s: 0.4,
             measure_s: 0.4,
         },
     )
-    .unwrap();
-    Design::Static(cal)
 }
 
-fn record(plant: &PlantConfig) -> Recording {
-    let setup = RunSetup {
-        model: RobotConfig::nominal(),
-        plant_robot: RobotConfig::nominal(),
-        plant: plant.clone(),
-        period_s: 0.02,
-        seed: 1,
-        metadata: vec![],
-        tolerances: Tolerances::default(),
-        capture_latency_s: None,
-    };
-    let mut out = Vec::new();
-    run_in_process(&design(), &setup, &mut out, &mut |_| {}).unwrap();
-    Recording::read(out.as_slice(), "plant run").unwrap()
+/// [`design`] recorded with the nominal model driving `plant`.
+fn recording(plant: &PlantConfig) -> Recording {
+    record(&RobotConfig::nominal(), plant, &design())
 }
 
 /// The held-out rows: settled rows of the test set with a measured pose.
@@ -164,8 +124,8 @@ struct Case {
 }
 
 fn case(scale: f64, with_clean: bool) -> Case {
-    let noisy = record(&geometry_and_map_plant(scale, true));
-    let clean = with_clean.then(|| record(&geometry_and_map_plant(scale, false)));
+    let noisy = recording(&geometry_and_map_plant(scale, true));
+    let clean = with_clean.then(|| recording(&geometry_and_map_plant(scale, false)));
     let nominal = RobotConfig::nominal();
     let joint = calibrate(&nominal, &noisy, "plant run", &Options::default()).unwrap();
     let paper_opts = Options {
@@ -273,15 +233,7 @@ fn truth_recording(plant: &PlantConfig) -> Recording {
     let model = Robot::nominal();
     let set =
         pcr_experiments::CalibrationSet::design(&model, &CalibrationOptions::default()).unwrap();
-    let mut rec = Recording {
-        columns: [
-            "t_s", "q1", "q2", "q3", "x_mm", "y_mm", "phi_deg", "m1x_mm", "m1y_mm", "m2x_mm",
-            "m2y_mm", "m3x_mm", "m3y_mm", "pose_id", "settled", "set",
-        ]
-        .map(String::from)
-        .to_vec(),
-        ..Recording::default()
-    };
+    let mut rec = empty_static_recording();
     for (k, p) in set.poses.iter().enumerate() {
         let s = model.ik(&p.pose).unwrap();
         let q: [i32; 3] =

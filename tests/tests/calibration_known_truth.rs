@@ -3,6 +3,7 @@
 //! noise. The calibration crate never sees the plant; this test compares the two.
 
 use pcr_calibration::calibrate::{calibrate, Method, Options};
+use pcr_integration_tests::plant_recordings::{empty_static_recording, geometry_and_map_plant};
 use pcr_kinematics::{Pose, Robot};
 use pcr_plant::{PlantConfig, TruthModel};
 use pcr_recording::{Recording, Row, Split};
@@ -26,15 +27,7 @@ fn static_recording(
     let truth = TruthModel::new(nominal, plant).unwrap();
     let model = Robot::new(nominal).unwrap();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
-    let mut rec = Recording {
-        columns: [
-            "t_s", "q1", "q2", "q3", "x_mm", "y_mm", "phi_deg", "m1x_mm", "m1y_mm", "m2x_mm",
-            "m2y_mm", "m3x_mm", "m3y_mm", "pose_id", "settled", "set",
-        ]
-        .map(String::from)
-        .to_vec(),
-        ..Recording::default()
-    };
+    let mut rec = empty_static_recording();
     let mut t = 0.0;
     let mut id = 0u64;
     for phi in [0.0, 10.0, -10.0] {
@@ -82,14 +75,6 @@ fn static_recording(
     rec
 }
 
-fn geometry_and_map_only() -> PlantConfig {
-    let proto = PlantConfig::prototype();
-    let mut c = PlantConfig::ideal();
-    c.geometry = proto.geometry;
-    c.tendon_map = proto.tendon_map;
-    c
-}
-
 /// The noise of one static pose's M_i position: `rows` rows of sigma per coordinate averaged,
 /// two coordinates: sigma sqrt(2 / rows) RMS.
 fn static_floor(sigma: f64, rows: usize) -> f64 {
@@ -103,7 +88,7 @@ fn static_floor(sigma: f64, rows: usize) -> f64 {
 fn prototype_geometry_and_true_map_calibrate_down_to_the_noise() {
     let nominal = RobotConfig::nominal();
     let (sigma, rows) = (0.05, 10);
-    let rec = static_recording(&geometry_and_map_only(), &nominal, rows, sigma);
+    let rec = static_recording(&geometry_and_map_plant(1.0, false), &nominal, rows, sigma);
     let cal = calibrate(&nominal, &rec, "known-truth", &Options::default()).unwrap();
     let (test, before) = (cal.after.test.unwrap(), cal.before.test.unwrap());
     assert_eq!((cal.data.train, cal.data.test), (48, 24));
@@ -230,7 +215,7 @@ fn the_paper_parameters_come_back_within_their_uncertainty() {
 #[test]
 fn the_paper_method_gives_the_two_steps_as_before() {
     let nominal = RobotConfig::nominal();
-    let rec = static_recording(&geometry_and_map_only(), &nominal, 10, 0.05);
+    let rec = static_recording(&geometry_and_map_plant(1.0, false), &nominal, 10, 0.05);
     let opts = Options {
         method: Method::Paper,
         ..Options::default()

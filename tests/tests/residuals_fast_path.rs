@@ -4,11 +4,7 @@
 //! recordings with a compliance effect (joint springs; a load with backlash): the same effects in
 //! the same order, the same parameters within a tenth of their standard error, the same verdict.
 
-use pcr_experiments::{
-    run_in_process, CalibrationOptions, Design, PathsDesign, RunSetup, StaticDesign, Tolerances,
-    VisitTiming,
-};
-use pcr_kinematics::Robot;
+use pcr_integration_tests::plant_recordings::{quiet_plant, record, visits_and_paths};
 use pcr_plant::PlantConfig;
 use pcr_recording::Recording;
 use pcr_residuals::progress::Progress;
@@ -19,44 +15,10 @@ use std::sync::{Arc, Mutex};
 
 /// Records static visits (`points` per scaled boundary) and the paper's paths twice on the
 /// in-process chain, the nominal model driving `plant`.
-fn record(plant: &PlantConfig, points: usize) -> Vec<Recording> {
-    let robot = Robot::nominal();
-    let cal = StaticDesign::calibration(
-        &robot,
-        &CalibrationOptions {
-            points,
-            test_per_group: 2,
-            ..CalibrationOptions::default()
-        },
-        VisitTiming {
-            speed_mm_s: 30.0,
-            settle_s: 0.6,
-            measure_s: 0.4,
-        },
-    )
-    .unwrap();
-    let designs = [
-        Design::Static(cal),
-        Design::Paths(PathsDesign::default()),
-        Design::Paths(PathsDesign::default()),
-    ];
-    let setup = RunSetup {
-        model: RobotConfig::nominal(),
-        plant_robot: RobotConfig::nominal(),
-        plant: plant.clone(),
-        period_s: 0.02,
-        seed: 1,
-        metadata: vec![],
-        tolerances: Tolerances::default(),
-        capture_latency_s: None,
-    };
-    designs
+fn recordings(plant: &PlantConfig, points: usize) -> Vec<Recording> {
+    visits_and_paths(points, 2)
         .iter()
-        .map(|d| {
-            let mut out = Vec::new();
-            run_in_process(d, &setup, &mut out, &mut |_| {}).unwrap();
-            Recording::read(out.as_slice(), "plant run").unwrap()
-        })
+        .map(|d| record(&RobotConfig::nominal(), plant, d))
         .collect()
 }
 
@@ -115,7 +77,7 @@ fn summary(a: &Attribution) -> String {
 
 /// The fast and the exact path agree on `plant`'s recordings; returns the fast result.
 fn assert_fast_is_exact(plant: &PlantConfig, points: usize) -> Attribution {
-    let recs = record(plant, points);
+    let recs = recordings(plant, points);
     let counter = Arc::new(Counter::default());
     let fast = analyse(&recs, false, ProgressSink::new(counter.clone()));
     let exact = analyse(&recs, true, ProgressSink::default());
@@ -156,12 +118,6 @@ fn assert_fast_is_exact(plant: &PlantConfig, points: usize) -> Attribution {
     assert_eq!(stages.last().map(|s| s.1.as_str()), Some("what remains"));
     assert!(counter.steps.load(Ordering::Relaxed) >= Options::default().candidates.len());
     fast
-}
-
-fn quiet_plant() -> PlantConfig {
-    let mut p = PlantConfig::ideal();
-    p.capture.noise = true;
-    p
 }
 
 #[test]

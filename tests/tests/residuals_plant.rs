@@ -3,67 +3,17 @@
 //! IK and drive steps) with one effect on in the plant, analyses the recording, and checks the
 //! name, the parameter and the held-out gain. The residual crate never sees the plant.
 
-use pcr_experiments::{
-    run_in_process, CalibrationOptions, Design, PathsDesign, RunSetup, StaticDesign, Tolerances,
-    VisitTiming,
-};
-use pcr_kinematics::Robot;
+use pcr_experiments::Design;
+use pcr_integration_tests::plant_recordings::{quiet_plant, record, visits_and_paths};
 use pcr_plant::PlantConfig;
 use pcr_recording::{Recording, COMMAND_DELAY_KEY};
 use pcr_residuals::alignment::TimingFinding;
 use pcr_residuals::{attribute, Attribution, Blocks, Options, Series, Verdict};
 use pcr_robot::RobotConfig;
 
-/// A plant with nominal geometry, the linear map, capture noise, and no other effect.
-fn quiet_plant() -> PlantConfig {
-    let mut p = PlantConfig::ideal();
-    p.capture.noise = true;
-    p
-}
-
-/// Records `design` with `model` driving `plant`.
-fn record(model: &RobotConfig, plant: &PlantConfig, design: &Design) -> Recording {
-    let setup = RunSetup {
-        model: model.clone(),
-        plant_robot: RobotConfig::nominal(),
-        plant: plant.clone(),
-        period_s: 0.02,
-        seed: 1,
-        metadata: vec![],
-        tolerances: Tolerances::default(),
-        capture_latency_s: None,
-    };
-    let mut out = Vec::new();
-    run_in_process(design, &setup, &mut out, &mut |_| {}).unwrap();
-    Recording::read(out.as_slice(), "plant run").unwrap()
-}
-
 /// Static visits (5 per scaled boundary: 45 poses) and the paper's paths twice.
 fn designs() -> Vec<Design> {
-    designs_sized(5, 2)
-}
-
-/// Static visits (`points` per scaled boundary, nine boundaries) and the paper's paths `paths`
-/// times.
-fn designs_sized(points: usize, paths: usize) -> Vec<Design> {
-    let robot = Robot::nominal();
-    let cal = StaticDesign::calibration(
-        &robot,
-        &CalibrationOptions {
-            points,
-            test_per_group: 2,
-            ..CalibrationOptions::default()
-        },
-        VisitTiming {
-            speed_mm_s: 30.0,
-            settle_s: 0.6,
-            measure_s: 0.4,
-        },
-    )
-    .unwrap();
-    std::iter::once(Design::Static(cal))
-        .chain((0..paths).map(|_| Design::Paths(PathsDesign::default())))
-        .collect()
+    visits_and_paths(5, 2)
 }
 
 /// The same recording as another recorder would write it: each row's q is the motor position
@@ -378,7 +328,7 @@ fn finds_backlash_and_a_load_together() {
     plant.external_wrench.fx_n = 1.0;
     // The load is a smooth function of the pose that the calibration parameters mimic in part:
     // more visits and four runs of the paths give the held-out blocks to tell it apart.
-    let a = analyse_designs(&RobotConfig::nominal(), &plant, &designs_sized(9, 4));
+    let a = analyse_designs(&RobotConfig::nominal(), &plant, &visits_and_paths(9, 4));
     let n = names(&a);
     assert!(
         n.contains(&"backlash") && n.contains(&"external_load"),

@@ -1,0 +1,397 @@
+//! The trust-region step in the scaled variables: the subproblem (the Jacobian scaled by the
+//! Coleman-Li and column scales, augmented by the `g dv` diagonal, and its SVD), its exact
+//! solution (Moré 1978), the step kept inside the box (cut back to the bound, reflected off it,
+//! or along the scaled steepest descent), and the radius update.
+
+use super::bounds::Bounds;
+use super::LsqError;
+use nalgebra::{DMatrix, DVector};
+
+/// The trust-region subproblem at one point, in the scaled variables p_h (a step of x is
+/// `d .* p_h`).
+pub(super) struct Subproblem {
+    /// Scale of each variable: sqrt(v) over the column scale (units of x per scaled unit).
+    d: DVector<f64>,
+    /// The Coleman-Li diagonal term g dv in the scaled variables.
+    diag_h: DVector<f64>,
+    /// Gradient in the scaled variables.
+    g_h: DVector<f64>,
+    /// Jacobian in the scaled variables (m x n).
+    j_h: DMatrix<f64>,
+    /// Rows of the augmented Jacobian, m + n.
+    rows: usize,
+    /// U^T of the augmented Jacobian's SVD times the augmented residuals (f, 0).
+    uf: DVector<f64>,
+    /// Singular values of the augmented Jacobian.
+    s: DVector<f64>,
+    /// V^T of the augmented Jacobian's SVD.
+    vt: DMatrix<f64>,
+    /// Fraction of the way to a bound that a step cut back to it goes (0.995 or more).
+    theta: f64,
+}
+
+/// A step that stays inside the box.
+pub(super) struct Step {
+    /// The step of x (units of x).
+    pub(super) full: DVector<f64>,
+    /// The same step in the scaled variables.
+    pub(super) scaled: DVector<f64>,
+    /// The cost reduction the quadratic model predicts for it.
+    pub(super) predicted: f64,
+}
+
+impl Step {
+    fn new(full: DVector<f64>, scaled: DVector<f64>, predicted: f64) -> Self {
+        Step {
+            full,
+            scaled,
+            predicted,
+        }
+    }
+}
+
+impl Subproblem {
+    /// The subproblem at a point with Jacobian `jac`, residuals `f` and gradient `g`, from the
+    /// Coleman-Li vector `v` (already multiplied by the column scale where `dv` is not 0), its
+    /// derivative `dv`, the inverse column scale `scale_inv` and the scaled gradient's infinity
+    /// norm `g_norm`. `Err` when the SVD does not converge.
+    pub(super) fn new(
+        jac: &DMatrix<f64>,
+        f: &DVector<f64>,
+        g: &DVector<f64>,
+        v: &DVector<f64>,
+        dv: &DVector<f64>,
+        scale_inv: &DVector<f64>,
+        g_norm: f64,
+    ) -> Result<Self, LsqError> {
+        let (m, n) = jac.shape();
+        // d = sqrt(v) * scale (scale = 1 / scale_inv)
+        let d = DVector::from_fn(n, |k, _| v[k].sqrt() / scale_inv[k]);
+        let diag_h = DVector::from_fn(n, |k, _| g[k] * dv[k] / scale_inv[k]);
+        let g_h = d.component_mul(g);
+        let j_h = scaled_columns(jac, &d);
+        let svd = augmented_jacobian(&j_h, &diag_h).svd(true, true);
+        let (Some(u), Some(vt)) = (svd.u, svd.v_t) else {
+            return Err(LsqError::NonFinite);
+        };
+        let uf = u.tr_mul(&augmented_residuals(f, n));
+        Ok(Subproblem {
+            d,
+            diag_h,
+            g_h,
+            j_h,
+            rows: m + n,
+            uf,
+            s: svd.singular_values,
+            vt,
+            theta: (1.0 - g_norm).max(0.995),
+        })
+    }
+
+    /// The step from `x` for the radius `delta`, starting Moré's iteration from the
+    /// Levenberg-Marquardt parameter `alpha`: the step kept inside `bounds`, and the new
+    /// parameter.
+    pub(super) fn step(
+        &self,
+        x: &DVector<f64>,
+        bounds: &Bounds,
+        delta: f64,
+        alpha: f64,
+    ) -> (Step, f64) {
+        let (p_h, alpha) = trust_region_step(self.rows, &self.uf, &self.s, &self.vt, delta, alpha);
+        let p_full = self.d.component_mul(&p_h);
+        (select_step(x, self, p_full, p_h, delta, bounds), alpha)
+    }
+}
+
+/// `jac` with column k multiplied by `d[k]`.
+fn scaled_columns(jac: &DMatrix<f64>, d: &DVector<f64>) -> DMatrix<f64> {
+    let mut j_h = jac.clone();
+    for k in 0..d.len() {
+        j_h.column_mut(k).scale_mut(d[k]);
+    }
+    j_h
+}
+
+/// The (m + n) x n Jacobian of the scaled problem: `j_h` above the diagonal sqrt(diag_h)
+/// (negative terms taken as 0).
+fn augmented_jacobian(j_h: &DMatrix<f64>, diag_h: &DVector<f64>) -> DMatrix<f64> {
+    let (m, n) = j_h.shape();
+    let mut j_aug = DMatrix::zeros(m + n, n);
+    j_aug.view_mut((0, 0), (m, n)).copy_from(j_h);
+    for k in 0..n {
+        j_aug[(m + k, k)] = diag_h[k].max(0.0).sqrt();
+    }
+    j_aug
+}
+
+/// The residuals `f` followed by `n` zeros.
+fn augmented_residuals(f: &DVector<f64>, n: usize) -> DVector<f64> {
+    let m = f.len();
+    let mut f_aug = DVector::zeros(m + n);
+    f_aug.rows_mut(0, m).copy_from(f);
+    f_aug
+}
+
+/// The exact trust-region step in the scaled variables from the SVD of the augmented Jacobian
+/// (Moré 1978): the Gauss-Newton step if it fits, else the Levenberg-Marquardt step of length
+/// `delta`. Returns the step and the LM parameter.
+fn trust_region_step(
+    rows: usize,
+    uf: &DVector<f64>,
+    s: &DVector<f64>,
+    vt: &DMatrix<f64>,
+    delta: f64,
+    alpha0: f64,
+) -> (DVector<f64>, f64) {
+    let n = s.len();
+    let suf = s.component_mul(uf);
+    let smax = s.max();
+    let smin = s.min();
+    let full_rank = rows >= n && smin > f64::EPSILON * rows as f64 * smax;
+    if full_rank {
+        let p = -vt.tr_mul(&uf.component_div(s));
+        if p.norm() <= delta {
+            return (p, 0.0);
+        }
+    }
+    let phi = |a: f64| -> (f64, f64) {
+        let mut pn2 = 0.0;
+        let mut d3 = 0.0;
+        for k in 0..n {
+            let den = s[k] * s[k] + a;
+            pn2 += (suf[k] / den).powi(2);
+            d3 += suf[k] * suf[k] / (den * den * den);
+        }
+        let pn = pn2.sqrt();
+        (pn - delta, -d3 / pn)
+    };
+    let mut upper = suf.norm() / delta;
+    let mut lower = if full_rank {
+        let (f0, d0) = phi(0.0);
+        -f0 / d0
+    } else {
+        0.0
+    };
+    let mut a = if alpha0 == 0.0 && !full_rank || alpha0 <= 0.0 {
+        (0.001 * upper).max((lower * upper).sqrt())
+    } else {
+        alpha0
+    };
+    for _ in 0..10 {
+        if a < lower || a > upper {
+            a = (0.001 * upper).max((lower * upper).sqrt());
+        }
+        let (f, df) = phi(a);
+        if f < 0.0 {
+            upper = a;
+        }
+        let r = f / df;
+        lower = lower.max(a - r);
+        a -= (f + delta) * r / delta;
+        if f.abs() < 0.01 * delta {
+            break;
+        }
+    }
+    let coef = DVector::from_fn(n, |k, _| suf[k] / (s[k] * s[k] + a));
+    let mut p = -vt.tr_mul(&coef);
+    let pn = p.norm();
+    if pn > 0.0 {
+        p *= delta / pn;
+    }
+    (p, a)
+}
+
+/// Value of the quadratic model 0.5 s^T (J^T J + diag) s + g^T s.
+fn quadratic(j: &DMatrix<f64>, g: &DVector<f64>, s: &DVector<f64>, diag: &DVector<f64>) -> f64 {
+    let js = j * s;
+    0.5 * (js.norm_squared() + diag.component_mul(s).dot(s)) + g.dot(s)
+}
+
+/// Coefficients (a, b, c) of the model along s0 + t s: a t^2 + b t + c.
+fn quadratic_1d(
+    j: &DMatrix<f64>,
+    g: &DVector<f64>,
+    s: &DVector<f64>,
+    diag: &DVector<f64>,
+    s0: Option<&DVector<f64>>,
+) -> (f64, f64, f64) {
+    let v = j * s;
+    let a = 0.5 * (v.norm_squared() + diag.component_mul(s).dot(s));
+    let mut b = g.dot(s);
+    let mut c = 0.0;
+    if let Some(s0) = s0 {
+        let u = j * s0;
+        b += u.dot(&v) + diag.component_mul(s0).dot(s);
+        c = 0.5 * (u.norm_squared() + diag.component_mul(s0).dot(s0)) + g.dot(s0);
+    }
+    (a, b, c)
+}
+
+/// Minimum of a t^2 + b t + c on [lo, hi]: (t, value).
+fn minimize_1d(a: f64, b: f64, c: f64, lo: f64, hi: f64) -> (f64, f64) {
+    let f = |t: f64| a * t * t + b * t + c;
+    let mut best = (lo, f(lo));
+    let fh = f(hi);
+    if fh < best.1 {
+        best = (hi, fh);
+    }
+    if a != 0.0 {
+        let t = -0.5 * b / a;
+        if t > lo && t < hi {
+            let ft = f(t);
+            if ft < best.1 {
+                best = (t, ft);
+            }
+        }
+    }
+    best
+}
+
+/// Largest t >= 0 with x + t s inside the box, and which components hit (sign of s there).
+fn step_to_bound(x: &DVector<f64>, s: &DVector<f64>, bounds: &Bounds) -> (f64, DVector<f64>) {
+    let (lb, ub) = (&bounds.lower, &bounds.upper);
+    let n = x.len();
+    let steps = DVector::from_fn(n, |k, _| {
+        if s[k] == 0.0 {
+            f64::INFINITY
+        } else {
+            ((lb[k] - x[k]) / s[k]).max((ub[k] - x[k]) / s[k])
+        }
+    });
+    let t = steps.min();
+    let hits = DVector::from_fn(n, |k, _| {
+        if steps[k] == t && s[k] != 0.0 {
+            s[k].signum()
+        } else {
+            0.0
+        }
+    });
+    (t, hits)
+}
+
+/// The positive t with |x + t s| = delta.
+fn to_trust_region(x: &DVector<f64>, s: &DVector<f64>, delta: f64) -> f64 {
+    let a = s.dot(s);
+    if a == 0.0 {
+        return f64::INFINITY;
+    }
+    let b = x.dot(s);
+    let c = x.dot(x) - delta * delta;
+    let disc = (b * b - a * c).max(0.0).sqrt();
+    let q = -(b + disc.copysign(b));
+    let (t1, t2) = (q / a, c / q);
+    t1.max(t2)
+}
+
+/// Keeps the step `p` (scaled: `p_h`) from `x` inside the box: the full step if it stays
+/// inside, else the best of the step cut back to the bound, its reflection, and the scaled
+/// gradient direction, by the reduction the quadratic model of `sub` predicts.
+fn select_step(
+    x: &DVector<f64>,
+    sub: &Subproblem,
+    mut p: DVector<f64>,
+    mut p_h: DVector<f64>,
+    delta: f64,
+    bounds: &Bounds,
+) -> Step {
+    let Subproblem {
+        d,
+        diag_h,
+        g_h,
+        j_h,
+        theta,
+        ..
+    } = sub;
+    let theta = *theta;
+    let xp = x + &p;
+    if bounds.contains(&xp) {
+        let v = quadratic(j_h, g_h, &p_h, diag_h);
+        return Step::new(p, p_h, -v);
+    }
+    let (p_stride, hits) = step_to_bound(x, &p, bounds);
+    // Reflection off the bound that was hit.
+    let mut r_h = p_h.clone();
+    for k in 0..x.len() {
+        if hits[k] != 0.0 {
+            r_h[k] = -r_h[k];
+        }
+    }
+    let r = d.component_mul(&r_h);
+    p *= p_stride;
+    p_h *= p_stride;
+    let x_on_bound = x + &p;
+    let to_tr = to_trust_region(&p_h, &r_h, delta);
+    let (to_bound, _) = step_to_bound(&x_on_bound, &r, bounds);
+    let r_stride = to_bound.min(to_tr);
+    let (r_lo, r_hi) = if r_stride > 0.0 {
+        let lo = (1.0 - theta) * p_stride / r_stride;
+        let hi = if r_stride == to_bound {
+            theta * to_bound
+        } else {
+            to_tr
+        };
+        (lo, hi)
+    } else {
+        (0.0, -1.0)
+    };
+    let (r_step, r_step_h, r_value) = if r_lo <= r_hi {
+        let (a, b, c) = quadratic_1d(j_h, g_h, &r_h, diag_h, Some(&p_h));
+        let (t, val) = minimize_1d(a, b, c, r_lo, r_hi);
+        let rh = &p_h + &r_h * t;
+        (d.component_mul(&rh), rh, val)
+    } else {
+        (p.clone(), p_h.clone(), f64::INFINITY)
+    };
+    // The step cut back to (theta times) the bound.
+    p *= theta;
+    p_h *= theta;
+    let p_value = quadratic(j_h, g_h, &p_h, diag_h);
+    // Scaled steepest descent, kept inside the box and the region.
+    let ag_h = -g_h;
+    let ag = d.component_mul(&ag_h);
+    let ag_norm = ag_h.norm();
+    let to_tr = if ag_norm > 0.0 { delta / ag_norm } else { 0.0 };
+    let (to_bound, _) = step_to_bound(x, &ag, bounds);
+    let ag_max = if to_bound < to_tr {
+        theta * to_bound
+    } else {
+        to_tr
+    };
+    let (a, b, _) = quadratic_1d(j_h, g_h, &ag_h, diag_h, None);
+    let (t, ag_value) = minimize_1d(a, b, 0.0, 0.0, ag_max);
+    if p_value < r_value && p_value < ag_value {
+        Step::new(p, p_h, -p_value)
+    } else if r_value < ag_value {
+        Step::new(r_step, r_step_h, -r_value)
+    } else {
+        Step::new(ag * t, ag_h * t, -ag_value)
+    }
+}
+
+/// Trust-region radius update from the ratio of actual to predicted reduction: a quarter of
+/// the step's (scaled) length after a poor step, twice the radius after a good step that
+/// reached the region's edge (`bound_hit`). Returns (radius, ratio).
+pub(super) fn update_radius(
+    delta: f64,
+    actual: f64,
+    predicted: f64,
+    step_norm: f64,
+    bound_hit: bool,
+) -> (f64, f64) {
+    let ratio = if predicted > 0.0 {
+        actual / predicted
+    } else if predicted == actual {
+        1.0
+    } else {
+        0.0
+    };
+    let delta = if ratio < 0.25 {
+        0.25 * step_norm
+    } else if ratio > 0.75 && bound_hit {
+        2.0 * delta
+    } else {
+        delta
+    };
+    (delta, ratio)
+}
