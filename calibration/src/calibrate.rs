@@ -182,6 +182,9 @@ pub struct DataSummary {
     pub split: SplitSource,
     /// Capture noise of one row estimated from the settled rows (x mm, y mm, phi deg).
     pub row_noise: Option<[f64; 3]>,
+    /// Settled rows left out because their command changed inside a visit
+    /// (`pcr_recording::SettledPose::moved_rows`).
+    pub moved_rows: usize,
 }
 
 /// The whole result (the JSON of `pcr calibrate`).
@@ -335,6 +338,7 @@ pub fn calibrate_data(
     check_enough_data(data)?;
     let origin = data.origin.clone();
     let mut warnings = Vec::new();
+    note_moved_rows(data, &mut warnings);
     let obs: LegSets = std::array::from_fn(|i| {
         (
             leg_observations(start, data, i, Split::Train),
@@ -435,6 +439,27 @@ fn summary(data: &StaticData) -> DataSummary {
         test: data.of(Split::Test).count(),
         split: data.split.clone(),
         row_noise: data.row_noise,
+        moved_rows: moved_rows(data),
+    }
+}
+
+/// Settled rows left out of the static poses because their command changed inside a visit.
+fn moved_rows(data: &StaticData) -> usize {
+    data.poses.iter().map(|p| p.settled.moved_rows).sum()
+}
+
+fn note_moved_rows(data: &StaticData, warnings: &mut Vec<String>) {
+    let n = moved_rows(data);
+    if n > 0 {
+        let visits = data
+            .poses
+            .iter()
+            .filter(|p| p.settled.moved_rows > 0)
+            .count();
+        warnings.push(format!(
+            "{}: {n} settled rows in {visits} visits have a command other than the one their visit held longest; they are left out (a robot is not at rest at a command it has just been given or is still reaching)",
+            data.origin
+        ));
     }
 }
 

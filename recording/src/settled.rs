@@ -1,7 +1,12 @@
 //! Static measurements: the settled rows of a recording grouped per target visit and averaged.
 //!
 //! A group is a maximal run of consecutive rows with `settled = 1` and the same `pose_id`, `rep`
-//! and commanded motor positions. Its measured values are the means over the rows of the group
+//! and commanded motor positions. A robot whose command changes while its rows say `settled` is
+//! not at rest at every one of those commands (a logger that marks rest from the measured motion
+//! keeps marking it for the rows a latency hides the next move in; one that writes the position
+//! reached shows the last steps of the approach): of one visit's consecutive settled rows, only
+//! the command held the longest is a static measurement, and the other rows are counted in
+//! [`SettledPose::moved_rows`]. Its measured values are the means over the rows of the group
 //! that have them (orientation as a circular mean); the sample standard deviations are kept as
 //! a measure of the capture noise. Calibration, evaluation and residual tools all read static
 //! poses through this one definition.
@@ -70,6 +75,9 @@ pub struct SettledPose {
     pub m_rows: [usize; 3],
     /// Planned pose of the first row of the group (x mm, y mm, phi deg), if recorded.
     pub planned: Option<[f64; 3]>,
+    /// Settled rows of the same visit (adjacent, same `pose_id` and `rep`) left out because
+    /// their command differs from the one this group held longest.
+    pub moved_rows: usize,
 }
 
 impl SettledPose {
@@ -178,6 +186,7 @@ pub fn settled_poses(rec: &Recording, origin: &str) -> Result<Vec<SettledPose>, 
                         .iter()
                         .all(Option::is_some)
                         .then(|| row.planned.map(|v| v.unwrap_or(0.0))),
+                    moved_rows: 0,
                 },
                 Acc::default(),
                 Default::default(),
@@ -209,7 +218,35 @@ pub fn settled_poses(rec: &Recording, origin: &str) -> Result<Vec<SettledPose>, 
             origin: origin.into(),
         });
     }
-    Ok(out)
+    Ok(held_commands(out))
+}
+
+/// Of every visit's adjacent groups (consecutive rows, same `pose_id` and `rep`, different
+/// commands), keeps the one with the most rows (the first of equals) and counts the others'
+/// rows in its `moved_rows`.
+fn held_commands(groups: Vec<SettledPose>) -> Vec<SettledPose> {
+    let mut out: Vec<SettledPose> = Vec::with_capacity(groups.len());
+    // The end (exclusive row index) of the visit the last kept group belongs to.
+    let mut visit_end = usize::MAX;
+    for g in groups {
+        let same_visit = out.last().is_some_and(|last| {
+            g.first_row == visit_end && g.pose_id == last.pose_id && g.rep == last.rep
+        });
+        visit_end = g.first_row + g.rows;
+        if !same_visit {
+            out.push(g);
+            continue;
+        }
+        let last = out.last_mut().expect("a visit is open");
+        if g.rows > last.rows {
+            let moved = last.moved_rows + last.rows;
+            *last = g;
+            last.moved_rows = moved;
+        } else {
+            last.moved_rows += g.rows;
+        }
+    }
+    out
 }
 
 #[cfg(test)]
@@ -218,6 +255,26 @@ mod tests {
 
     fn rec(text: &str) -> Recording {
         Recording::read(text.as_bytes(), "t.csv").unwrap()
+    }
+
+    #[test]
+    fn a_command_that_changes_inside_a_visit_keeps_the_one_held_longest() {
+        // Visit 0: the first row still shows the last step of the approach, the last one the
+        // next move's first command (a latency keeps the robot at rest for a row); visit 1 is
+        // the same target, later, with another command: a visit of its own.
+        let r = rec("t_s,q1,q2,q3,x_mm,y_mm,phi_deg,pose_id,rep,settled\n\
+             0.00,9,2,3,0,0,0,0,0,1\n\
+             0.02,10,2,3,1,1,0,0,0,1\n\
+             0.04,10,2,3,1,1,0,0,0,1\n\
+             0.06,10,2,3,1,1,0,0,0,1\n\
+             0.08,11,2,3,1,1,0,0,0,1\n\
+             0.10,12,2,3,5,5,0,0,0,0\n\
+             0.12,12,2,3,5,5,0,0,1,1\n");
+        let g = settled_poses(&r, "t.csv").unwrap();
+        assert_eq!(g.len(), 2);
+        assert_eq!((g[0].q, g[0].rows, g[0].moved_rows), ([10, 2, 3], 3, 2));
+        assert_eq!(g[0].pose, Some([1.0, 1.0, 0.0]));
+        assert_eq!((g[1].q, g[1].rows, g[1].moved_rows), ([12, 2, 3], 1, 0));
     }
 
     #[test]
