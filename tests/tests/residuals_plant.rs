@@ -34,6 +34,35 @@ fn as_position_reached(rec: &Recording, declare: Option<f64>) -> Recording {
     Recording::read(text.as_slice(), "position-reached recording").unwrap()
 }
 
+/// The same experiment as a logger of another lab writes it: the position reached in each row
+/// (D = 0, undeclared), every second row (40 ms), no metadata at all, its own column order,
+/// CRLF line ends and a column the format does not know.
+fn as_another_logger(rec: &Recording) -> Recording {
+    let reached = as_position_reached(rec, None);
+    let mut text = Vec::new();
+    reached.write(&mut text).unwrap();
+    let text = String::from_utf8(text).unwrap();
+    let mut lines = text.lines().filter(|l| !l.starts_with('#'));
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let order: Vec<usize> = (0..header.len()).rev().collect();
+    let row = |cells: Vec<&str>, extra: &str| {
+        let mut out: Vec<&str> = order.iter().map(|&i| cells[i]).collect();
+        out.insert(2, extra);
+        out.join(",")
+    };
+    let mut out = vec![
+        "# written by another lab's logger".to_string(),
+        row(header.clone(), "temperature_c"),
+    ];
+    out.extend(
+        lines
+            .step_by(2)
+            .map(|l| row(l.split(',').collect(), "21.5")),
+    );
+    let text = out.join("\r\n") + "\r\n";
+    Recording::read(text.as_bytes(), "another lab's recording").unwrap()
+}
+
 /// Analyses recordings, starting the analysis from `model`.
 fn attribute_on(model: &RobotConfig, recs: &[Recording]) -> Attribution {
     let series: Vec<Series> = recs
@@ -170,6 +199,40 @@ fn finds_backlash_and_its_play() {
         "{}",
         report(&a)
     );
+}
+
+#[test]
+fn another_labs_logger_at_half_the_rate_gives_the_same_backlash() {
+    let mut plant = quiet_plant();
+    plant.stepper.backlash = true;
+    plant.stepper.backlash_steps = [3.0, 4.0, 3.0];
+    let model = RobotConfig::nominal();
+    let recs: Vec<Recording> = designs()
+        .iter()
+        .map(|d| record(&model, &plant, d))
+        .collect();
+    let other: Vec<Recording> = recs.iter().map(as_another_logger).collect();
+    assert!(other[0].command_delay_s().unwrap() == 0.0 && other[0].metadata.is_empty());
+    assert!(other[0].rows.len() < recs[0].rows.len() / 2 + 1);
+    let (a, b) = (attribute_on(&model, &recs), attribute_on(&model, &other));
+    assert_eq!(names(&a), names(&b), "{} vs {}", report(&a), report(&b));
+    assert_eq!(a.verdict, b.verdict, "{} vs {}", report(&a), report(&b));
+    assert!(b.timing_finding.is_none(), "{:?}", b.timing);
+    assert!(names(&a).contains(&"backlash"), "{}", report(&a));
+    // Half the rows: the parameters agree within two standard errors of the coarser file.
+    let params = |x: &Attribution| -> Vec<pcr_residuals::candidates::Estimate> {
+        x.effects.iter().flat_map(|e| e.params.clone()).collect()
+    };
+    for (x, y) in params(&a).iter().zip(&params(&b)) {
+        let tol = 2.0 * y.std.unwrap_or(0.05);
+        assert!(
+            (x.value - y.value).abs() <= tol,
+            "{}: {} vs {} (+- {tol})",
+            x.name,
+            x.value,
+            y.value
+        );
+    }
 }
 
 #[test]
