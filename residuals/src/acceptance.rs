@@ -72,7 +72,7 @@ pub(crate) fn accept<'a>(
     }
     let (cfg, nctx, sse) = cur?;
     // Every effect's parameters together on the full model.
-    let refined = crate::refine::refine(&cfg, &ctx.model, series, blocks, w_phi, 3000);
+    let refined = crate::refine::refine(&cfg, &ctx.model, series, blocks, w_phi, 3000, Some(&nctx));
     if refined != cfg {
         if let Ok(model) = ExtendedModel::like(&refined, &ctx.model) {
             let rctx = Context::new(series, model, blocks, w_phi);

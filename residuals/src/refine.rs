@@ -4,8 +4,13 @@
 //! their parameters are refined together against the training rows with the bounded
 //! trust-region solver of the calibration (`pcr_calibration::lsq`). An effect that stood in for
 //! another one (a latency estimate biased by a backlash found later) is corrected here.
+//!
+//! The calibration parameters are refined with them, linearised as the candidates fit them (the
+//! nuisance, with its prior): every candidate's fit moves them, so an effect found early leaves
+//! them where they suited it alone, and a later effect could otherwise only be fitted around
+//! that.
 
-use crate::context::wrap;
+use crate::context::{wrap, Context, NuisanceTable};
 use crate::model::ExtendedModel;
 use crate::series::{Blocks, Series};
 use pcr_calibration::lsq::{self, Options, Problem};
@@ -203,25 +208,73 @@ struct Refit<'a> {
     rows: Vec<Vec<usize>>,
     n: usize,
     w_phi: f64,
+    /// The calibration parameters, linearised at `base`.
+    nuisance: Option<Linearised>,
+}
+
+/// The calibration parameters linearised at the refinement's start: their columns on the
+/// refined rows and their prior.
+struct Linearised {
+    table: std::sync::Arc<NuisanceTable>,
+    /// Per refined row (in `Refit::rows` order), its row in the table, if predicted there.
+    row: Vec<Option<usize>>,
+    /// sqrt(1 / sigma^2) of each parameter.
+    prior_sqrt: Vec<f64>,
+}
+
+impl Linearised {
+    fn new(ctx: &Context, rows: &[Vec<usize>]) -> Linearised {
+        let table = ctx.nuisance();
+        let index: std::collections::HashMap<(usize, usize), usize> = ctx
+            .rows
+            .iter()
+            .enumerate()
+            .map(|(i, r)| ((r.s, r.k), i))
+            .collect();
+        let row = rows
+            .iter()
+            .enumerate()
+            .flat_map(|(s, ks)| ks.iter().map(move |&k| (s, k)))
+            .map(|sk| index.get(&sk).copied())
+            .collect();
+        let prior_sqrt = table.nui.prior().iter().map(|p| p.sqrt()).collect();
+        Linearised {
+            table,
+            row,
+            prior_sqrt,
+        }
+    }
+
+    fn n(&self) -> usize {
+        self.table.nui.n
+    }
 }
 
 impl Refit<'_> {
+    /// Number of effect parameters (the first ones of `x`).
+    fn n_effects(&self) -> usize {
+        self.slots.len()
+    }
+
     fn config(&self, x: &[f64]) -> RobotConfig {
         let mut c = self.base.clone();
         for (s, v) in self.slots.iter().zip(x) {
             (s.set)(&mut c.effects, s.index, *v);
         }
+        if let Some(l) = &self.nuisance {
+            l.table.nui.apply(&x[self.n_effects()..], &mut c);
+        }
         c
     }
-}
 
-impl Problem for Refit<'_> {
-    fn residual_count(&self) -> usize {
-        3 * self.n
-    }
-
-    fn residuals(&mut self, x: &[f64], r: &mut [f64]) -> Result<(), String> {
-        let model = ExtendedModel::like(&self.config(x), self.like).map_err(|e| e.0)?;
+    /// The full model's residuals with the effects at `x` (calibration parameters as in
+    /// `base`) into the first 3 n entries of `r`.
+    fn effect_residuals(&self, x: &[f64], r: &mut [f64]) -> Result<(), String> {
+        let mut c = self.base.clone();
+        for (s, v) in self.slots.iter().zip(x) {
+            (s.set)(&mut c.effects, s.index, *v);
+        }
+        let model = ExtendedModel::like(&c, self.like).map_err(|e| e.0)?;
         let mut k = 0;
         for (s, rows) in self.series.iter().zip(&self.rows) {
             let want: std::collections::HashSet<usize> = rows.iter().copied().collect();
@@ -245,9 +298,99 @@ impl Problem for Refit<'_> {
     }
 }
 
+impl Problem for Refit<'_> {
+    fn residual_count(&self) -> usize {
+        3 * self.n + self.nuisance.as_ref().map_or(0, Linearised::n)
+    }
+
+    /// The full model's residuals at the effects' values, less the linearised change of the
+    /// calibration parameters, then the prior's rows.
+    fn residuals(&mut self, x: &[f64], r: &mut [f64]) -> Result<(), String> {
+        let ne = self.n_effects();
+        self.effect_residuals(&x[..ne], r)?;
+        let Some(l) = &self.nuisance else {
+            return Ok(());
+        };
+        let g = &x[ne..];
+        for (k, i) in l.row.iter().enumerate() {
+            let Some(i) = i else { continue };
+            for (col, gj) in l.table.cols[*i].iter().zip(g) {
+                for c in 0..3 {
+                    r[3 * k + c] -= col[c] * gj;
+                }
+            }
+        }
+        for (j, gj) in g.iter().enumerate() {
+            r[3 * self.n + j] = l.prior_sqrt[j] * gj;
+        }
+        Ok(())
+    }
+
+    /// Forward differences for the effects (the full model); the calibration parameters'
+    /// columns are the linearisation's own.
+    fn jacobian(
+        &mut self,
+        x: &[f64],
+        r: &[f64],
+        upper: &[f64],
+        j: &mut nalgebra::DMatrix<f64>,
+    ) -> Result<(), String> {
+        let ne = self.n_effects();
+        let Some(l) = self.nuisance.take() else {
+            return lsq::forward_difference(self, x, r, upper, j);
+        };
+        let eps = f64::EPSILON.sqrt();
+        let mut xp = x.to_vec();
+        let mut rp = vec![0.0; r.len()];
+        let mut out = Ok(());
+        let mut base = vec![0.0; 3 * self.n];
+        if let Err(e) = self.effect_residuals(&x[..ne], &mut base) {
+            self.nuisance = Some(l);
+            return Err(e);
+        }
+        for k in 0..ne {
+            let mut h = eps * x[k].abs().max(1.0);
+            if x[k] + h > upper[k] {
+                h = -h;
+            }
+            xp[k] = x[k] + h;
+            let h = xp[k] - x[k];
+            // The nuisance's part of the residual is the same at x and xp: the difference of
+            // the full model's residuals alone is the column.
+            if let Err(e) = self.effect_residuals(&xp[..ne], &mut rp) {
+                out = Err(e);
+                break;
+            }
+            for i in 0..3 * self.n {
+                j[(i, k)] = (rp[i] - base[i]) / h;
+            }
+            for i in 3 * self.n..r.len() {
+                j[(i, k)] = 0.0;
+            }
+            xp[k] = x[k];
+        }
+        for gj in 0..l.n() {
+            for i in 0..r.len() {
+                j[(i, ne + gj)] = 0.0;
+            }
+            for (k, row) in l.row.iter().enumerate() {
+                let Some(row) = row else { continue };
+                for c in 0..3 {
+                    j[(3 * k + c, ne + gj)] = -l.table.cols[*row][gj][c];
+                }
+            }
+            j[(3 * self.n + gj, ne + gj)] = l.prior_sqrt[gj];
+        }
+        self.nuisance = Some(l);
+        out
+    }
+}
+
 /// Refines the continuous parameters of every effect of `config` on (at most `max_rows` of)
 /// the training rows; returns the refined configuration (or the input when there is nothing to
-/// refine or the solver fails). The models are solved as `like` is (exact or fast).
+/// refine or the solver fails). The models are solved as `like` is (exact or fast). With
+/// `nuisance` (the residuals of `config`), the calibration parameters are refined with them,
+/// linearised at `config`.
 pub fn refine(
     config: &RobotConfig,
     like: &ExtendedModel,
@@ -255,6 +398,7 @@ pub fn refine(
     blocks: &Blocks,
     w_phi: f64,
     max_rows: usize,
+    nuisance: Option<&Context>,
 ) -> RobotConfig {
     let slots = slots(&config.effects);
     if slots.is_empty() {
@@ -293,13 +437,19 @@ pub fn refine(
         .iter()
         .map(|s| (s.get)(&config.effects, s.index))
         .collect();
-    let lo: Vec<f64> = slots.iter().map(|s| s.lo).collect();
-    let hi: Vec<f64> = slots.iter().map(|s| s.hi).collect();
-    let x0: Vec<f64> = x0
+    let mut lo: Vec<f64> = slots.iter().map(|s| s.lo).collect();
+    let mut hi: Vec<f64> = slots.iter().map(|s| s.hi).collect();
+    let mut x0: Vec<f64> = x0
         .iter()
         .zip(lo.iter().zip(&hi))
         .map(|(v, (l, h))| v.clamp(*l, *h))
         .collect();
+    let nuisance = nuisance.map(|ctx| Linearised::new(ctx, &rows));
+    if let Some(l) = &nuisance {
+        x0.resize(x0.len() + l.n(), 0.0);
+        lo.resize(x0.len(), f64::NEG_INFINITY);
+        hi.resize(x0.len(), f64::INFINITY);
+    }
     let mut p = Refit {
         base: config,
         like,
@@ -308,6 +458,7 @@ pub fn refine(
         rows,
         n,
         w_phi,
+        nuisance,
     };
     let opts = Options {
         max_evaluations: 200,

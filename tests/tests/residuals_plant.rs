@@ -235,6 +235,70 @@ fn another_labs_logger_at_half_the_rate_gives_the_same_backlash() {
     }
 }
 
+/// The same rows with each row's q the command of the row after (so each pose answers the
+/// command two rows before its own) and no declaration: 40 ms of delay the file does not
+/// declare, written as text.
+fn answering_two_rows_earlier(rec: &Recording) -> Recording {
+    let mut r = rec.clone();
+    for k in 0..r.rows.len() - 1 {
+        r.rows[k].q = rec.rows[k + 1].q;
+    }
+    r.rows.pop();
+    r.metadata.retain(|(k, _)| k != COMMAND_DELAY_KEY);
+    let mut text = Vec::new();
+    r.write(&mut text).unwrap();
+    Recording::read(text.as_slice(), "undeclared-delay recording").unwrap()
+}
+
+#[test]
+fn an_undeclared_delay_with_backlash_and_friction_is_explained() {
+    // The prototype's lag sources: a 10 ms capture latency, plays, support and joint friction.
+    let mut plant = quiet_plant();
+    plant.capture.latency_s = 0.01;
+    plant.stepper.backlash = true;
+    plant.stepper.backlash_steps = [3.0, 4.0, 3.0];
+    plant.friction = PlantConfig::prototype().friction;
+    let model = RobotConfig::nominal();
+    let recs: Vec<Recording> = designs()
+        .iter()
+        .map(|d| record(&model, &plant, d))
+        .collect();
+    let late: Vec<Recording> = recs.iter().map(answering_two_rows_earlier).collect();
+    let (a, b) = (attribute_on(&model, &recs), attribute_on(&model, &late));
+    // 40 ms beyond the declaration is latency: both readings name the same effects, the
+    // undeclared file's latency 40 ms longer, the same plays, and both are explained.
+    let mut sorted = [names(&a), names(&b)];
+    sorted.iter_mut().for_each(|n| n.sort());
+    assert_eq!(sorted[0], sorted[1], "{} vs {}", report(&a), report(&b));
+    assert!(names(&b).contains(&"latency"), "{}", report(&b));
+    let latency = |x: &Attribution| {
+        x.robot
+            .effects
+            .latency
+            .as_ref()
+            .map_or(0.0, |l| l.latency_s)
+    };
+    let extra = latency(&b) - latency(&a);
+    assert!(
+        (extra - 0.04).abs() < 0.003,
+        "{extra}: {} vs {}",
+        report(&a),
+        report(&b)
+    );
+    let plays = |x: &Attribution| x.robot.effects.backlash.as_ref().unwrap().steps;
+    for (p, q) in plays(&a).iter().zip(plays(&b)) {
+        assert!((p - q).abs() < 0.1, "{:?} vs {:?}", plays(&a), plays(&b));
+    }
+    assert_eq!(a.verdict, Verdict::Explained, "{}", report(&a));
+    assert_eq!(b.verdict, Verdict::Explained, "{}", report(&b));
+    assert!(
+        b.after.position_rms_mm < 1.05 * a.after.position_rms_mm,
+        "{} vs {}",
+        report(&b),
+        report(&a)
+    );
+}
+
 #[test]
 fn finds_latency_and_two_effects_at_once() {
     // Capture latency 40 ms and backlash together.
