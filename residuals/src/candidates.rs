@@ -373,7 +373,12 @@ pub fn latency(ctx: &Context, train: &[usize]) -> Option<Fitted> {
         e.latency = Some(Latency { latency_s: tau });
         motor_side_delta(ctx, &e, rows)
     };
-    let grid: Vec<f64> = (0..=55).map(|k| -0.05 + 0.01 * k as f64).collect();
+    // From scratch: -50 ms to 0.5 s. Once the model holds a latency (a Gauss-Newton step of
+    // its acceptance), it moves little from one step to the next: 30 ms around it.
+    let grid: Vec<f64> = match &ctx.model.config.effects.latency {
+        None => (0..=55).map(|k| -0.05 + 0.01 * k as f64).collect(),
+        Some(l) => (-3..=3).map(|k| l.latency_s + 0.01 * k as f64).collect(),
+    };
     let (tau, sse, curv) = minimise_1d(&mut |t| sse_at(ctx, &rows, &shift(t, Some(&rows))), &grid);
     let std = profile_std(sse, 3 * rows.len(), curv);
     let nui = ctx.nuisance().nui.clone();
@@ -414,7 +419,18 @@ pub fn backlash(ctx: &Context, train: &[usize]) -> Option<Fitted> {
             .collect();
         motor_change(ctx, &q_new, rows)
     };
-    let grid: Vec<f64> = (0..=40).map(|k| 0.5 * k as f64).collect();
+    // From scratch: every play up to 20 steps. Once the model holds a play (a Gauss-Newton step
+    // of its acceptance), the play moves little from one step to the next: 3 steps around it.
+    let held = e.backlash.as_ref().map(|b| b.steps);
+    let grid_of = |m: usize| -> Vec<f64> {
+        match held {
+            None => (0..=40).map(|k| 0.5 * k as f64).collect(),
+            Some(h) => (-6..=6)
+                .map(|k| h[m] + 0.5 * k as f64)
+                .filter(|v| *v >= 0.0)
+                .collect(),
+        }
+    };
     let mut b = [0.0; 3];
     let mut stds = [None; 3];
     // The play acts on each motor alone: a profile over motor m's play runs the play operator
@@ -447,7 +463,7 @@ pub fn backlash(ctx: &Context, train: &[usize]) -> Option<Fitted> {
                         .collect();
                     sse_at(ctx, &rows, &d)
                 },
-                &grid,
+                &grid_of(m),
             );
             b[m] = x.max(0.0);
             stds[m] = profile_std(s, 3 * rows.len(), curv);

@@ -10,12 +10,14 @@
 //! them where they suited it alone, and a later effect could otherwise only be fitted around
 //! that.
 
-use crate::context::{wrap, Context, NuisanceTable};
+use crate::context::{wrap, Context};
+use crate::linear::{Columns, Nuisance};
 use crate::model::ExtendedModel;
 use crate::series::{Blocks, Series};
 use pcr_calibration::lsq::{self, Options, Problem};
 use pcr_robot::effects::Effects;
 use pcr_robot::RobotConfig;
+use rayon::prelude::*;
 
 /// A continuous effect parameter: (get, set, lower, upper).
 struct Slot {
@@ -213,40 +215,50 @@ struct Refit<'a> {
 }
 
 /// The calibration parameters linearised at the refinement's start: their columns on the
-/// refined rows and their prior.
+/// refined rows (computed for those rows only) and their prior.
 struct Linearised {
-    table: std::sync::Arc<NuisanceTable>,
-    /// Per refined row (in `Refit::rows` order), its row in the table, if predicted there.
-    row: Vec<Option<usize>>,
+    nui: Nuisance,
+    /// Per refined row (in `Refit::rows` order), its columns, if the model predicts the row.
+    cols: Vec<Option<Columns>>,
     /// sqrt(1 / sigma^2) of each parameter.
     prior_sqrt: Vec<f64>,
 }
 
 impl Linearised {
     fn new(ctx: &Context, rows: &[Vec<usize>]) -> Linearised {
-        let table = ctx.nuisance();
+        let nui = Nuisance::of(ctx);
         let index: std::collections::HashMap<(usize, usize), usize> = ctx
             .rows
             .iter()
             .enumerate()
             .map(|(i, r)| ((r.s, r.k), i))
             .collect();
-        let row = rows
+        let at: Vec<Option<usize>> = rows
             .iter()
             .enumerate()
             .flat_map(|(s, ks)| ks.iter().map(move |&k| (s, k)))
             .map(|sk| index.get(&sk).copied())
             .collect();
-        let prior_sqrt = table.nui.prior().iter().map(|p| p.sqrt()).collect();
+        let cols = at
+            .par_iter()
+            .map(|i| {
+                i.map(|i| {
+                    let mut c = vec![[0.0; 3]; nui.n];
+                    nui.columns(ctx, i, &mut c, 0);
+                    c
+                })
+            })
+            .collect();
+        let prior_sqrt = nui.prior().iter().map(|p| p.sqrt()).collect();
         Linearised {
-            table,
-            row,
+            nui,
+            cols,
             prior_sqrt,
         }
     }
 
     fn n(&self) -> usize {
-        self.table.nui.n
+        self.nui.n
     }
 }
 
@@ -262,7 +274,7 @@ impl Refit<'_> {
             (s.set)(&mut c.effects, s.index, *v);
         }
         if let Some(l) = &self.nuisance {
-            l.table.nui.apply(&x[self.n_effects()..], &mut c);
+            l.nui.apply(&x[self.n_effects()..], &mut c);
         }
         c
     }
@@ -312,9 +324,9 @@ impl Problem for Refit<'_> {
             return Ok(());
         };
         let g = &x[ne..];
-        for (k, i) in l.row.iter().enumerate() {
-            let Some(i) = i else { continue };
-            for (col, gj) in l.table.cols[*i].iter().zip(g) {
+        for (k, cols) in l.cols.iter().enumerate() {
+            let Some(cols) = cols else { continue };
+            for (col, gj) in cols.iter().zip(g) {
                 for c in 0..3 {
                     r[3 * k + c] -= col[c] * gj;
                 }
@@ -373,10 +385,10 @@ impl Problem for Refit<'_> {
             for i in 0..r.len() {
                 j[(i, ne + gj)] = 0.0;
             }
-            for (k, row) in l.row.iter().enumerate() {
-                let Some(row) = row else { continue };
+            for (k, cols) in l.cols.iter().enumerate() {
+                let Some(cols) = cols else { continue };
                 for c in 0..3 {
-                    j[(3 * k + c, ne + gj)] = -l.table.cols[*row][gj][c];
+                    j[(3 * k + c, ne + gj)] = -cols[gj][c];
                 }
             }
             j[(3 * self.n + gj, ne + gj)] = l.prior_sqrt[gj];
