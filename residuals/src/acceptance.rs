@@ -25,6 +25,8 @@ pub(crate) fn accept<'a>(
     progress: &crate::progress::ProgressSink,
 ) -> Option<(RobotConfig, Context<'a>)> {
     let name = first.name;
+    // The steps compare training errors: their contexts hold the training rows alone.
+    let n_train = ctx.train().len();
     let start_sse = ctx.sse(&ctx.train(), None);
     let mut cur: Option<(RobotConfig, Context<'a>, f64)> = None;
     let mut step = Some(first);
@@ -46,8 +48,8 @@ pub(crate) fn accept<'a>(
                 .validate("extended robot")
                 .ok()
                 .and_then(|_| ExtendedModel::like(&cand, &ctx.model).ok())
-                .map(|m| Context::new(series, m, blocks, w_phi))
-                .filter(|n| n.rows.len() + 5 >= ctx.rows.len());
+                .map(|m| Context::training(series, m, blocks, w_phi))
+                .filter(|n| n.rows.len() + 5 >= n_train);
             if let Some(nctx) = nctx {
                 let sse = nctx.sse(&nctx.train(), None);
                 if sse < base_sse {
@@ -81,5 +83,7 @@ pub(crate) fn accept<'a>(
             }
         }
     }
-    Some((cfg, nctx))
+    // The held-out rows too, for the scoring that follows.
+    let model = ExtendedModel::like(&cfg, &ctx.model).ok()?;
+    Some((cfg, Context::new(series, model, blocks, w_phi)))
 }

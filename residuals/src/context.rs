@@ -85,12 +85,47 @@ pub struct NuisanceTable {
 impl<'a> Context<'a> {
     /// Predicts every series with `model` and collects the residuals.
     pub fn new(series: &'a [Series], model: ExtendedModel, blocks: &Blocks, w_phi: f64) -> Self {
-        let preds: Vec<Vec<Prediction>> = series.iter().map(|s| model.predict(s)).collect();
+        Self::of_rows(series, model, blocks, w_phi, true)
+    }
+
+    /// [`Context::new`] on the training rows alone: the held-out rows are neither predicted nor
+    /// listed. For the steps of a search that compare training errors only.
+    pub fn training(
+        series: &'a [Series],
+        model: ExtendedModel,
+        blocks: &Blocks,
+        w_phi: f64,
+    ) -> Self {
+        Self::of_rows(series, model, blocks, w_phi, false)
+    }
+
+    fn of_rows(
+        series: &'a [Series],
+        model: ExtendedModel,
+        blocks: &Blocks,
+        w_phi: f64,
+        held_out_too: bool,
+    ) -> Self {
+        let wanted = |si: usize, k: usize| held_out_too || !blocks.held_out[blocks.block[si][k]];
+        let preds: Vec<Vec<Prediction>> = series
+            .iter()
+            .enumerate()
+            .map(|(si, s)| {
+                if held_out_too {
+                    model.predict(s)
+                } else {
+                    model.predict_where(s, &|k| wanted(si, k))
+                }
+            })
+            .collect();
         let mut rows = Vec::new();
         let mut unpredicted = 0;
         for (si, s) in series.iter().enumerate() {
             for (k, smp) in s.samples.iter().enumerate() {
                 let Some(m) = smp.pose else { continue };
+                if !wanted(si, k) {
+                    continue;
+                }
                 let Some(p) = preds[si][k].pose else {
                     unpredicted += 1;
                     continue;

@@ -225,7 +225,9 @@ struct Linearised {
 }
 
 impl Linearised {
-    fn new(ctx: &Context, rows: &[Vec<usize>]) -> Linearised {
+    /// `share`: the refined rows' share of the training rows (the prior is the candidates'
+    /// prior on every training row, so it weighs the same against the data on a subsample).
+    fn new(ctx: &Context, rows: &[Vec<usize>], share: f64) -> Linearised {
         let nui = Nuisance::of(ctx);
         let index: std::collections::HashMap<(usize, usize), usize> = ctx
             .rows
@@ -249,7 +251,7 @@ impl Linearised {
                 })
             })
             .collect();
-        let prior_sqrt = nui.prior().iter().map(|p| p.sqrt()).collect();
+        let prior_sqrt = nui.prior().iter().map(|p| (p * share).sqrt()).collect();
         Linearised {
             nui,
             cols,
@@ -456,7 +458,7 @@ pub fn refine(
         .zip(lo.iter().zip(&hi))
         .map(|(v, (l, h))| v.clamp(*l, *h))
         .collect();
-    let nuisance = nuisance.map(|ctx| Linearised::new(ctx, &rows));
+    let nuisance = nuisance.map(|ctx| Linearised::new(ctx, &rows, n as f64 / total.max(1) as f64));
     if let Some(l) = &nuisance {
         x0.resize(x0.len() + l.n(), 0.0);
         lo.resize(x0.len(), f64::NEG_INFINITY);
