@@ -110,13 +110,7 @@ impl<'a> Context<'a> {
         let preds: Vec<Vec<Prediction>> = series
             .iter()
             .enumerate()
-            .map(|(si, s)| {
-                if held_out_too {
-                    model.predict(s)
-                } else {
-                    model.predict_where(s, &|k| wanted(si, k))
-                }
-            })
+            .map(|(si, s)| model.predict_where(s, &|k| wanted(si, k)))
             .collect();
         let mut rows = Vec::new();
         let mut unpredicted = 0;
