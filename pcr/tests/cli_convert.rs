@@ -4,12 +4,8 @@
 //! the channels and schemas, one message per row, every CSV cell equal on the row channel. Bad
 //! input is an error naming it, never a panic.
 
-use std::path::{Path, PathBuf};
+use pcr_integration_tests::{check_mcap, workspace as repo};
 use std::process::{Command, Output};
-
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
 
 fn pcr(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_pcr"))
@@ -17,35 +13,6 @@ fn pcr(args: &[&str]) -> Output {
         .current_dir(repo())
         .output()
         .expect("pcr runs")
-}
-
-/// The test venv's Python (`scripts/setup.sh`); its absence fails the test, saying so.
-fn venv_python() -> PathBuf {
-    let p = repo().join(".venv/bin/python");
-    assert!(
-        p.exists(),
-        "{} is missing: run `bash scripts/setup.sh` (installs the `mcap` reader of \
-         scripts/requirements.txt)",
-        p.display()
-    );
-    p
-}
-
-fn check_mcap(mcap: &Path, csv: &Path, more: &[&str]) -> String {
-    let o = Command::new(venv_python())
-        .arg(repo().join("tests/py/check_mcap.py"))
-        .arg(mcap)
-        .arg(csv)
-        .args(more)
-        .output()
-        .expect("python runs");
-    let out = String::from_utf8_lossy(&o.stdout).into_owned();
-    assert!(
-        o.status.success(),
-        "{out}{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    out
 }
 
 /// A recording as another lab's logger might write it: its own metadata, the optional columns
