@@ -846,13 +846,7 @@ pub fn best_family(target: &[(f64, f64)]) -> Option<TendonMapSpec> {
             .map(|(d, k)| (m.kappa(*d) - k).abs())
             .fold(0.0, f64::max);
         if best.as_ref().is_none_or(|b| err < b.0 * 0.999) {
-            best = Some((
-                err,
-                TendonMapSpec {
-                    model: kind,
-                    coeffs: c,
-                },
-            ));
+            best = Some((err, TendonMapSpec::symmetric(kind, c)));
         }
     }
     best.map(|b| b.1)

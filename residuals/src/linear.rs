@@ -153,7 +153,7 @@ impl Nuisance {
     /// The nuisance set of the context's model.
     pub fn of(ctx: &Context) -> Nuisance {
         let cfg = ctx.model.config.legs.clone();
-        let n_map: [usize; 3] = std::array::from_fn(|i| cfg[i].tendon_map.model.n_coeffs());
+        let n_map: [usize; 3] = std::array::from_fn(|i| cfg[i].tendon_map.form().n_coeffs());
         let legs = cfg
             .iter()
             .map(|c| {
@@ -175,8 +175,9 @@ impl Nuisance {
             for gname in GEO {
                 names.push(format!("{gname}[{}]", i + 1));
             }
+            let form = cfg[i].tendon_map.form();
             for j in 0..n_map[i] {
-                names.push(format!("k{j}[{}]", i + 1));
+                names.push(format!("{}[{}]", form.coeff_name(j), i + 1));
             }
         }
         Nuisance {
@@ -213,7 +214,7 @@ impl Nuisance {
         let Some(ainv) = a.try_inverse() else {
             return;
         };
-        let mut basis = [0.0; 7];
+        let mut basis = [0.0; 13];
         for leg in 0..3 {
             let off = start + self.offset(leg);
             // dh_leg/d param by finite differences of the constraint alone.
@@ -235,11 +236,10 @@ impl Nuisance {
                 ];
             }
             // Map coefficients: d pose / d kappa_leg * basis_j(dl).
-            let kind = self.cfg[leg].tendon_map.model;
-            TendonMap::basis(kind, p.dl_eff[leg], &mut basis);
-            let skip = usize::from(!kind.has_offset());
+            let form = self.cfg[leg].tendon_map.form();
+            TendonMap::flat_basis(form, p.dl_eff[leg], &mut basis);
             for j in 0..self.n_map[leg] {
-                let b = basis[j + skip];
+                let b = basis[j];
                 out[off + GEO.len() + j] = [
                     p.j_kappa[(0, leg)] * b,
                     p.j_kappa[(1, leg)] * b,
@@ -256,7 +256,7 @@ impl Nuisance {
         let mut p = Vec::with_capacity(self.n);
         for leg in 0..3 {
             p.extend([1.0; GEO.len()]);
-            let coeffs = &self.cfg[leg].tendon_map.coeffs;
+            let coeffs = self.cfg[leg].tendon_map.flat_coeffs();
             for j in 0..self.n_map[leg] {
                 let c = coeffs.get(j).copied().unwrap_or(1e-3).abs().max(1e-6);
                 p.push(1.0 / (0.05 * c).powi(2));
@@ -291,9 +291,11 @@ impl Nuisance {
                 l.tendon_map.coeffs =
                     vec![1.0 / (l.actuation.tendon_offset_mm * self.cfg[leg].l_c_mm)];
             }
+            let mut flat = l.tendon_map.flat_coeffs();
             for j in 0..self.n_map[leg] {
-                l.tendon_map.coeffs[j] += dx[off + GEO.len() + j];
+                flat[j] += dx[off + GEO.len() + j];
             }
+            l.tendon_map = pcr_robot::TendonMapSpec::from_flat(l.tendon_map.form(), &flat);
         }
     }
 }

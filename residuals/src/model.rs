@@ -355,17 +355,10 @@ pub fn blend(old: &RobotConfig, new: &RobotConfig, s: f64) -> RobotConfig {
         o.l_st_mm = lerp(a.l_st_mm, b.l_st_mm);
         o.r_p_mm = lerp(a.r_p_mm, b.r_p_mm);
         o.theta_p_deg = lerp(a.theta_p_deg, b.theta_p_deg);
-        if a.tendon_map.model == b.tendon_map.model
-            && a.tendon_map.coeffs.len() == b.tendon_map.coeffs.len()
-        {
-            for (c, (x, y)) in o
-                .tendon_map
-                .coeffs
-                .iter_mut()
-                .zip(a.tendon_map.coeffs.iter().zip(&b.tendon_map.coeffs))
-            {
-                *c = lerp(*x, *y);
-            }
+        let (fa, fb) = (a.tendon_map.flat_coeffs(), b.tendon_map.flat_coeffs());
+        if a.tendon_map.form() == b.tendon_map.form() && fa.len() == fb.len() {
+            let flat: Vec<f64> = fa.iter().zip(&fb).map(|(x, y)| lerp(*x, *y)).collect();
+            o.tendon_map = pcr_robot::TendonMapSpec::from_flat(a.tendon_map.form(), &flat);
         }
     }
     let (eo, en) = (&old.effects, &new.effects);
