@@ -13,6 +13,7 @@
 //!    starting robot on the training and the test poses, beside the paper's two-step robot.
 
 use crate::data::{DataError, SplitSource, StaticData};
+use crate::diagnosis::{diagnose, Diagnosis};
 use crate::joint::{self, JointFit, JointObservations, JointParams};
 use crate::step1::{self, FreeGeometry, LegFit, LegObservation, Step1Error};
 use crate::step2::{self, PoseErrors, PoseObservation, Step2Error, Step2Fit, Step2Params};
@@ -308,6 +309,9 @@ pub struct Calibration {
     pub after: SplitAccuracy,
     /// Things the user should know (correlated parameters, parameters on bounds, ...).
     pub warnings: Vec<String>,
+    /// Why the held-out error stays far above the capture noise, when it does
+    /// ([`crate::diagnosis`]).
+    pub diagnosis: Option<Diagnosis>,
     /// The robot of the paper's two steps.
     #[serde(skip)]
     pub paper_robot: RobotConfig,
@@ -487,6 +491,7 @@ pub fn calibrate_data(
         _ => (paper_robot.clone(), paper),
     };
     compare_with_paper(joint.as_ref(), &paper, &mut warnings);
+    let diagnosis = diagnose(&robot, data);
     Ok(Calibration {
         data: summary(data),
         options: opts.clone(),
@@ -502,6 +507,7 @@ pub fn calibrate_data(
         before: split_accuracy(start, data),
         after,
         warnings,
+        diagnosis,
         paper_robot,
         robot,
     })

@@ -320,6 +320,9 @@ pub fn write_report(
     accuracy_rows(&mut md, "before, **test**", cal.before.test.as_ref());
     accuracy_rows(&mut md, "after, **test**", cal.after.test.as_ref());
     method_rows(&mut md, cal);
+    if let Some(d) = &cal.diagnosis {
+        let _ = writeln!(md, "\n**Why:** {}.", d.line);
+    }
     let others = other_warnings(cal);
     if !others.is_empty() {
         let _ = writeln!(md, "\n## Warnings\n");

@@ -301,6 +301,9 @@ fn print_summary(cal: &Calibration, report: Option<&Path>) {
     );
     line("train", Some(&cal.before.train), Some(&cal.after.train));
     line("test ", cal.before.test.as_ref(), cal.after.test.as_ref());
+    if let Some(d) = &cal.diagnosis {
+        println!("why: {}", d.line);
+    }
     for w in pcr_calibration::report::other_warnings(cal) {
         eprintln!("warning: {w}");
     }
