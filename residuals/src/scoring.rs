@@ -6,9 +6,9 @@
 //! capture noise, or, failing these, when it is the simpler explanation of what the
 //! recalibration explains (parsimony).
 
-use crate::attribution::Options;
-use crate::candidates::{Estimate, Fitted};
 use crate::context::Context;
+use crate::fitted::{Estimate, Fitted};
+use crate::options::Options;
 use crate::series::Blocks;
 use serde::Serialize;
 use statrs::distribution::{ContinuousCDF, StudentsT};
