@@ -152,7 +152,7 @@ impl Effect for Backlash {
         let (fit, delta, alone) = fit_joint(ctx, &nui, train, 0, &|_, _| {}, Some(&off))?;
         let nuis = nuisance_change(nui, fit.x.clone(), 0);
         Some(Fitted {
-            name: "backlash",
+            name: self.name(),
             params: (0..3)
                 .map(|m| Estimate::new(&format!("play motor {}", m + 1), b[m], stds[m], "steps"))
                 .collect(),

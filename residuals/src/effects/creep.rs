@@ -126,7 +126,7 @@ impl Effect for Creep {
         let nuis = nuisance_change(nui, fit.x.clone(), 3);
         let ok = gain.iter().all(|g| g.abs() < 0.5);
         ok.then(|| Fitted {
-            name: "creep",
+            name: self.name(),
             params,
             k: 4,
             delta,

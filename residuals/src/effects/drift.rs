@@ -90,7 +90,7 @@ impl Effect for Drift {
             .collect();
         let nuis = nuisance_change(nui, fit.x.clone(), 3);
         Some(Fitted {
-            name: "drift",
+            name: self.name(),
             params,
             k: 3,
             delta,

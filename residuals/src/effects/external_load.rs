@@ -32,7 +32,7 @@ impl Effect for ExternalLoad {
 
     /// F_x, F_y (N) and M (N mm) with the calibration parameters.
     fn fit(&self, ctx: &Context, train: &[usize]) -> Option<Fitted> {
-        compliance::fit(ctx, train, "external_load", &[0, 1, 2])
+        compliance::fit(ctx, train, self.name(), &[0, 1, 2])
     }
 
     fn declared(&self, effects: &Effects) -> Option<Vec<Estimate>> {

@@ -70,7 +70,7 @@ impl Effect for Frame {
         ];
         let nuis = nuisance_change(nui, fit.x.clone(), 3);
         Some(Fitted {
-            name: "frame",
+            name: self.name(),
             params,
             k: 3,
             delta,

@@ -44,7 +44,7 @@ impl Effect for Geometry {
         let sse = fit.sse;
         let x = fit.x;
         Some(Fitted {
-            name: "geometry",
+            name: self.name(),
             params,
             k,
             delta,

@@ -33,7 +33,7 @@ impl Effect for JointSprings {
 
     /// k_M and k_P (N mm/rad) with the calibration parameters.
     fn fit(&self, ctx: &Context, train: &[usize]) -> Option<Fitted> {
-        compliance::fit(ctx, train, "joint_springs", &[3, 4])
+        compliance::fit(ctx, train, self.name(), &[3, 4])
     }
 
     fn declared(&self, effects: &Effects) -> Option<Vec<Estimate>> {

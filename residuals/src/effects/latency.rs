@@ -66,7 +66,7 @@ impl Effect for Latency {
         let (fit, delta, alone) = fit_joint(ctx, &nui, train, 0, &|_, _| {}, Some(&off))?;
         let nuis = nuisance_change(nui, fit.x.clone(), 0);
         Some(Fitted {
-            name: "latency",
+            name: self.name(),
             params: vec![Estimate::new("latency", tau, std, "s")],
             k: 1,
             delta,

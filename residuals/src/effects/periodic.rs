@@ -128,7 +128,7 @@ impl Effect for Periodic {
             phase_deg: phase.to_degrees(),
         };
         Some(Fitted {
-            name: "periodic",
+            name: self.name(),
             params: vec![
                 Estimate::new("motor", (m + 1) as f64, None, ""),
                 Estimate::new("period", per, None, "steps"),

@@ -83,7 +83,7 @@ impl Effect for TendonMap {
             })
             .collect();
         Some(Fitted {
-            name: "tendon_map",
+            name: self.name(),
             params,
             k: 3 * NB,
             delta,
