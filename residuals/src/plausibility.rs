@@ -61,3 +61,42 @@ pub(crate) fn unphysical(
     }
     (!why.is_empty()).then(|| format!("unphysical: {}", why.join(", ")))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use pcr_robot::effects::{Compliance, Creep, FrameCorrection, Latency};
+
+    #[test]
+    fn reasons_go_from_the_frame_back_to_the_latency() {
+        let drawing = RobotConfig::nominal();
+        let mut c = drawing.clone();
+        c.effects.latency = Some(Latency { latency_s: -0.05 });
+        c.effects.creep = Some(Creep {
+            gain: [-0.1, 0.0, 0.0],
+            time_constant_s: 10.0,
+        });
+        c.effects.compliance = Some(Compliance {
+            ei_n_mm2: 6.5e4,
+            k_m_n_mm_per_rad: -10.0,
+            ..Compliance::default()
+        });
+        c.effects.frame = Some(FrameCorrection {
+            dx_mm: 5.0,
+            dy_mm: 0.0,
+            dphi_deg: 0.0,
+        });
+        assert_eq!(
+            unphysical(&c, &drawing, &drawing, &Options::default()).as_deref(),
+            Some(
+                "unphysical: a capture frame off by (5.00, 0.00) mm and 0.00 deg, negative joint \
+                 springs (k_M -10.0, k_P 0.0 N mm/rad), a tendon that shortens under load (creep \
+                 gains [-0.1, 0.0, 0.0]), the motion leads the command by 0.050 s"
+            )
+        );
+        assert_eq!(
+            unphysical(&drawing, &drawing, &drawing, &Options::default()),
+            None
+        );
+    }
+}

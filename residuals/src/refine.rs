@@ -310,3 +310,66 @@ pub fn refine(
         Err(_) => config.clone(),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use pcr_robot::effects::{
+        Backlash, Compliance, Creep, Drift, FrameCorrection, Latency, Periodic,
+    };
+
+    #[test]
+    fn the_parameters_are_in_the_robot_files_order() {
+        let e = Effects {
+            latency: Some(Latency { latency_s: 0.01 }),
+            backlash: Some(Backlash {
+                steps: [1.0, 2.0, 3.0],
+            }),
+            creep: Some(Creep {
+                gain: [0.1, 0.2, 0.3],
+                time_constant_s: 1.0,
+            }),
+            drift: Some(Drift {
+                rate_mm_per_s: [4e-3, 5e-3, 6e-3],
+            }),
+            compliance: Some(Compliance {
+                ei_n_mm2: 6.5e4,
+                force_n: [7.0, 8.0],
+                couple_n_mm: 900.0,
+                k_m_n_mm_per_rad: 1000.0,
+                k_p_n_mm_per_rad: 1100.0,
+            }),
+            frame: Some(FrameCorrection {
+                dx_mm: 12.0,
+                dy_mm: 13.0,
+                dphi_deg: 14.0,
+            }),
+            periodic: vec![Periodic {
+                motor: 1,
+                period_steps: 16.0,
+                amplitude_steps: 15.0,
+                phase_deg: 16.0,
+            }],
+        };
+        let values: Vec<f64> = slots(&e).iter().map(|s| (s.get)(&e, s.index)).collect();
+        let expected = [
+            0.01, 1.0, 2.0, 3.0, 0.1, 0.2, 0.3, 0.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0,
+            12.0, 13.0, 14.0, 15.0, 16.0,
+        ];
+        assert_eq!(values.len(), expected.len());
+        for (v, x) in values.iter().zip(expected) {
+            assert!((v - x).abs() < 1e-12, "{values:?}");
+        }
+        // Springs or a wrench alone free only theirs.
+        let springs = Effects {
+            compliance: Some(Compliance {
+                ei_n_mm2: 6.5e4,
+                k_m_n_mm_per_rad: 100.0,
+                ..Compliance::default()
+            }),
+            ..Effects::default()
+        };
+        assert_eq!(slots(&springs).len(), 2);
+        assert!(slots(&Effects::default()).is_empty());
+    }
+}

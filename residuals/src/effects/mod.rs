@@ -193,3 +193,25 @@ pub fn chain() -> Chain {
 pub fn lerp(a: f64, b: f64, s: f64) -> f64 {
     a + s * (b - a)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_registry_names_every_effect_once_with_one_reference() {
+        let mut n = names();
+        assert_eq!(n.first(), Some(&"geometry"), "the reference is tried first");
+        n.sort_unstable();
+        n.dedup();
+        assert_eq!(n.len(), ALL.len());
+        assert_eq!(
+            ALL.iter().filter(|e| e.role() == Role::Reference).count(),
+            1
+        );
+        assert_eq!(reference().map(|e| e.name()), Some("geometry"));
+        assert!(named("backlash").is_some_and(|e| e.role() == Role::Physical));
+        assert!(named("nonsense").is_none());
+        assert_eq!(chain().len(), ALL.len());
+    }
+}
