@@ -367,28 +367,28 @@ impl<'a> Search<'a> {
             .collect();
         // The reference for the effects: the recalibration fit; for the recalibration itself,
         // the model as it is.
-        let mut geo = effects::reference().and_then(|g| g.fit(ctx, &train));
+        let mut recal = effects::reference().and_then(|g| g.fit(ctx, &train));
         // A recalibration that would leave the drawing only mimics another cause: it is then no
         // reference (the effects are measured against the model as it is).
-        let geo_physical = geo.as_ref().is_some_and(|g| {
+        let recal_physical = recal.as_ref().is_some_and(|g| {
             let mut probe = self.config.clone();
             (g.change)(&mut probe);
             unphysical(&probe, &self.config, set.drawing, set.opts).is_none()
         });
-        let geo_delta = geo
+        let recal_delta = recal
             .as_ref()
-            .filter(|_| geo_physical)
+            .filter(|_| recal_physical)
             .map(|g| (g.delta.clone(), g.train_sse, g.k));
         let mut effect_reference = Reference {
-            delta: geo_delta.as_ref().map(|g| g.0.as_slice()),
-            train_sse: geo_delta
+            delta: recal_delta.as_ref().map(|g| g.0.as_slice()),
+            train_sse: recal_delta
                 .as_ref()
                 .map_or_else(|| ctx.sse(&train, None), |g| g.1),
-            k: geo_delta.as_ref().map_or(0, |g| g.2),
-            geometry_gain_ms: geo_delta.as_ref().map(|g| {
+            k: recal_delta.as_ref().map_or(0, |g| g.2),
+            recalibration_gain_ms: recal_delta.as_ref().map(|g| {
                 (ctx.sse(&test, None) - ctx.sse(&test, Some(&g.0))) / test.len().max(1) as f64
             }),
-            geometry_significant: false,
+            recalibration_significant: false,
         };
         set.opts
             .progress
@@ -415,13 +415,17 @@ impl<'a> Search<'a> {
         };
         let mut fits: Vec<(Fitted, Score)> = Vec::new();
         for (name, pre) in names.iter().zip(fitted_all) {
-            let fitted = if is_reference(name) { geo.take() } else { pre };
+            let fitted = if is_reference(name) {
+                recal.take()
+            } else {
+                pre
+            };
             let Some(f) = fitted.filter(within_linearisation) else {
                 continue;
             };
             let s = if is_reference(f.name) {
                 let s = scoring.score(&f, &Reference::model_as_is(ctx, &train));
-                effect_reference.geometry_significant = s.significant;
+                effect_reference.recalibration_significant = s.significant;
                 s
             } else {
                 scoring.score(&f, &effect_reference)
