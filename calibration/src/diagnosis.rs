@@ -104,7 +104,10 @@ pub fn diagnose(robot: &RobotConfig, data: &StaticData) -> Option<Diagnosis> {
         return None;
     }
     let n = test.len() as f64;
-    let sse: f64 = test.iter().map(|o| o.error[0].powi(2) + o.error[1].powi(2)).sum();
+    let sse: f64 = test
+        .iter()
+        .map(|o| o.error[0].powi(2) + o.error[1].powi(2))
+        .sum();
     let floor: f64 = test.iter().map(|o| o.noise).sum();
     let (test_rms, noise_rms) = ((sse / n).sqrt(), (floor / n).sqrt());
     if test_rms <= FAR_ABOVE * noise_rms {
@@ -270,11 +273,9 @@ fn map_columns(
 
 /// Columns of the time trend: x and y each linear and quadratic in the pose's time.
 fn time_columns(all: &[Obs], o: &Obs) -> Vec<[f64; 2]> {
-    let (t0, t1) = all
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |a, o| {
-            (a.0.min(o.t), a.1.max(o.t))
-        });
+    let (t0, t1) = all.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, o| {
+        (a.0.min(o.t), a.1.max(o.t))
+    });
     let u = (o.t - 0.5 * (t0 + t1)) / (0.5 * (t1 - t0)).max(1e-9);
     vec![[u, 0.0], [0.0, u], [u * u, 0.0], [0.0, u * u]]
 }
@@ -327,8 +328,7 @@ fn repeated_visits(data: &StaticData, noise: [f64; 3]) -> Option<String> {
             std::array::from_fn(|j| visits.iter().map(|v| v.1[j]).sum::<f64>() / n);
         for v in visits {
             ss += (v.1[0] - mean[0]).powi(2) + (v.1[1] - mean[1]).powi(2);
-            expected +=
-                (noise[0].powi(2) + noise[1].powi(2)) / v.2 as f64 * (n - 1.0) / n;
+            expected += (noise[0].powi(2) + noise[1].powi(2)) / v.2 as f64 * (n - 1.0) / n;
         }
         dof += visits.len() - 1;
     }

@@ -126,3 +126,38 @@ fn foreign_f0_is_calibrated_to_the_noise_floor_of_its_second_recording() {
     assert!(fit["rms_mm"].as_f64().unwrap() < fit["start_rms_mm"].as_f64().unwrap());
     assert!(rms <= paper_rms, "joint {rms} mm, two steps {paper_rms} mm");
 }
+
+/// `pcr residuals` as a new user runs it on the two recordings: it calibrates on `calib.csv`,
+/// holds `eval.csv` out, names no effect (there is none) and ends within 1.15 times the floor.
+#[test]
+fn residuals_on_foreign_f0_name_no_effect_and_end_at_the_floor() {
+    let d = tempfile::tempdir().unwrap();
+    let json = d.path().join("residuals.json");
+    let (calib, eval) = (foreign("calib.csv"), foreign("eval.csv"));
+    let o = pcr(&[
+        "residuals",
+        "--data",
+        calib.to_str().unwrap(),
+        "--holdout",
+        eval.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let named: Vec<&str> = v["effects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e["name"].as_str().unwrap())
+        .filter(|n| !matches!(*n, "geometry" | "tendon_map"))
+        .collect();
+    let after = v["after"]["position_rms_mm"].as_f64().unwrap();
+    println!(
+        "foreign-f0 residuals: effects {named:?}, held-out position RMS {} -> {after:.4} mm (floor 0.0705), verdict {}",
+        v["before"]["position_rms_mm"], v["verdict"]
+    );
+    assert!(named.is_empty(), "named {named:?} on a clean robot");
+    assert!(after <= 1.15 * 0.0705, "after {after} mm");
+}
