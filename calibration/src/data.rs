@@ -74,12 +74,17 @@ pub struct StaticPose {
     pub settled: SettledPose,
     /// Train or test.
     pub set: Split,
+    /// The motor positions the robot's legs actually reached, steps, where a model of effects
+    /// on the drive side (drift, creep, play, periodic errors) says they differ from the
+    /// commanded ones (`None`: the commanded positions). Set by the residual analysis when it
+    /// re-runs the calibration with its effects in the model.
+    pub q_eff: Option<[f64; 3]>,
 }
 
 impl StaticPose {
-    /// Commanded motor positions, steps.
+    /// Motor positions of the pose, steps: the effective ones where set, else the commanded.
     pub fn q(&self) -> [f64; 3] {
-        self.settled.q.map(f64::from)
+        self.q_eff.unwrap_or(self.settled.q.map(f64::from))
     }
 }
 
@@ -120,6 +125,7 @@ impl StaticData {
                 .map(|g| StaticPose {
                     set: g.set.unwrap_or(Split::Train),
                     settled: g,
+                    q_eff: None,
                 })
                 .collect();
             (poses, SplitSource::Column)
@@ -143,6 +149,7 @@ impl StaticData {
                         Split::Train
                     },
                     settled: g,
+                    q_eff: None,
                 })
                 .collect();
             (

@@ -277,6 +277,7 @@ pub fn evaluate(
                 .map(|s| crate::data::StaticPose {
                     settled: s.clone(),
                     set: Split::Test,
+                    q_eff: None,
                 })
                 .collect(),
             split: crate::data::SplitSource::Column,

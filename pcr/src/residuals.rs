@@ -10,6 +10,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use pcr_calibration::calibrate::{self, Options as CalOptions};
 use pcr_calibration::StaticData;
 use pcr_recording::Recording;
+use pcr_residuals::recalibration::Recalibration;
 use pcr_residuals::{attribute, Blocks, Options, Series};
 use std::path::PathBuf;
 
@@ -111,6 +112,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let data = read_all(&a.data)?;
     let holdout = read_all(&a.holdout)?;
     // Calibrate first on the static poses of the data (never of the holdout).
+    let mut recalibration = None;
     let robot = if a.no_calibrate {
         start
     } else {
@@ -129,6 +131,14 @@ pub fn run(a: Args) -> anyhow::Result<()> {
                 let cal = calibrate::calibrate_data(&start, &sd, &CalOptions::default()).context(
                     "calibration before the residual analysis (--no-calibrate skips it)",
                 )?;
+                recalibration = Some(std::sync::Arc::new(Recalibration {
+                    series: data
+                        .iter()
+                        .position(|(r, _)| std::ptr::eq(r, rec))
+                        .unwrap_or(0),
+                    data: sd,
+                    options: CalOptions::default(),
+                }));
                 progress.say(&format!(
                     "calibrated on {}: function {}, platform position RMS on its test poses {:.3} mm",
                     s.origin,
@@ -162,6 +172,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         },
         exact: a.exact,
         progress: progress.sink.clone(),
+        recalibration,
         ..Options::default()
     };
     if let Some(dir) = &a.report {
@@ -204,6 +215,22 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             e.evidence.effect_mm,
             e.evidence.p_value
         );
+    }
+    for r in &res.removed {
+        println!(
+            "removed {} in the backward pass: with every other effect in it no longer earns its place (held-out RMS {:.4} mm without it, {:.4} with it: {})",
+            r.name, r.held_out_rms_without_mm, r.held_out_rms_with_mm, r.note
+        );
+    }
+    let mut imitations: Vec<&str> = res
+        .candidates
+        .iter()
+        .filter(|c| c.note.starts_with("acts partly like"))
+        .map(|c| c.note.as_str())
+        .collect();
+    imitations.dedup();
+    for n in imitations {
+        println!("not named: {n}");
     }
     println!(
         "after: position mean {:.3} / max {:.3} / RMS {:.3} mm, orientation RMS {:.3} deg; verdict: {:?}",

@@ -8,6 +8,7 @@
 //! the features it correlates with are named.
 
 use crate::acceptance::{accept, GN_STEPS};
+use crate::backward::{self, Removed};
 use crate::context::{Context, Errors};
 use crate::effects::{self, Role};
 use crate::features::{self, FeatureLink, Features};
@@ -69,8 +70,11 @@ pub struct Attribution {
     pub before: Errors,
     /// Held-out errors of the extended model.
     pub after: Errors,
-    /// Effects added, in order.
+    /// Effects added, in order (without those the backward pass took out).
     pub effects: Vec<Added>,
+    /// Effects the backward pass took out: with all the others in, they no longer earned
+    /// their place.
+    pub removed: Vec<Removed>,
     /// Every candidate tried in every round.
     pub candidates: Vec<Score>,
     /// The verdict.
@@ -259,6 +263,13 @@ fn attribute_from<'a>(
             break;
         }
     }
+    let removed = search.backward(&backward::Setting {
+        series,
+        blocks,
+        opts,
+        w_phi,
+        noise_ms: set.noise_ms,
+    });
     let Search {
         config,
         ctx,
@@ -280,6 +291,7 @@ fn attribute_from<'a>(
         after: rest.after,
         verdict: Verdict::of(&added, rest.remains),
         effects: added,
+        removed,
         candidates: scores,
         noise: series
             .iter()
@@ -475,6 +487,20 @@ impl<'a> Search<'a> {
         set: &Setting<'a, '_>,
     ) -> Result<Confirmed<'a>, String> {
         let name = f.name;
+        // Consistency before naming: a physical effect takes the same parameters in independent
+        // parts of the data.
+        if let Some(e) = effects::named(name).filter(|e| e.role() == Role::Physical) {
+            set.opts.progress.stage(
+                round,
+                &format!("checking {name} on parts of the data"),
+                0,
+                0,
+            );
+            let train = self.ctx.train();
+            if let Some(why) = crate::consistency::inconsistency(e, &self.ctx, &train, &s.params) {
+                return Err(why);
+            }
+        }
         let points = effect_points(&self.ctx, &f.delta, test);
         set.opts.progress.stage(
             round,
@@ -492,6 +518,7 @@ impl<'a> Search<'a> {
             &set.opts.progress,
         )
         .ok_or_else(|| "the full model does not lower the training error".to_string())?;
+        let (config, ctx) = from_drawing(config, ctx, set);
         if let Some(why) = unphysical(&config, &self.config, set.drawing, set.opts) {
             return Err(why);
         }
@@ -521,6 +548,108 @@ impl<'a> Search<'a> {
             points,
         })
     }
+}
+
+impl<'a> Search<'a> {
+    /// The backward pass ([`crate::backward`]): every physical effect is tested against the
+    /// model without it; of those that fail, the one that earns least is taken out and the
+    /// others refitted, until every effect passes. Returns what was taken out.
+    fn backward(&mut self, set: &backward::Setting<'a>) -> Vec<Removed> {
+        let mut removed = Vec::new();
+        loop {
+            let judged: Vec<usize> = (0..self.added.len())
+                .filter(|&i| backward::judged(&self.added[i].name))
+                .collect();
+            set.opts.progress.stage(
+                0,
+                "checking every effect with the others in",
+                self.ctx.rows.len(),
+                judged.len(),
+            );
+            let mut worst: Option<(usize, backward::Without<'a>, String)> = None;
+            for &i in &judged {
+                let a = &self.added[i];
+                let w = backward::without(&self.config, &self.ctx, &a.name, &a.params, set);
+                set.opts.progress.step();
+                let Some(w) = w else { continue };
+                if let Some(why) = backward::fails(&w, judged.len(), set) {
+                    let gain = w.ms[0] - w.ms[1];
+                    if worst.as_ref().is_none_or(|x| gain < x.1.ms[0] - x.1.ms[1]) {
+                        worst = Some((i, w, why));
+                    }
+                }
+            }
+            let Some((i, w, why)) = worst else { break };
+            let a = self.added.remove(i);
+            if let Some(k) = self.effect_plots.iter().rposition(|(n, _)| *n == a.name) {
+                self.effect_plots.remove(k);
+            }
+            removed.push(Removed {
+                params: current_params(&self.config, &a.name, &a.params),
+                name: a.name,
+                held_out_rms_without_mm: w.ms[0].sqrt(),
+                held_out_rms_with_mm: w.ms[1].sqrt(),
+                p_value: w.p,
+                note: why,
+            });
+            self.config = w.config;
+            self.ctx = w.ctx;
+        }
+        removed
+    }
+}
+
+/// Most alternations of the calibration from the drawing and the effects' refinement.
+const FROM_DRAWING_ROUNDS: usize = 3;
+
+/// Joint estimation from the drawing ([`crate::recalibration`]): the calibration made again from
+/// the drawing with the effects of `config` in the model, the effects refitted on it, alternated
+/// while the held-out error falls by more than 0.1 %; the better held-out result of that and
+/// `config` (refined from the first calibration) is returned.
+fn from_drawing<'a>(
+    config: RobotConfig,
+    ctx: Context<'a>,
+    set: &Setting<'a, '_>,
+) -> (RobotConfig, Context<'a>) {
+    let Some(recal) = &set.opts.recalibration else {
+        return (config, ctx);
+    };
+    let held_out = |c: &Context| {
+        let t = c.test();
+        c.sse(&t, None) / t.len().max(1) as f64
+    };
+    let mut best_ms = held_out(&ctx);
+    let mut best = (config, ctx);
+    for _ in 0..FROM_DRAWING_ROUNDS {
+        let Some(cal) = crate::recalibration::recalibrated(&best.0, &best.1, set.drawing, recal)
+        else {
+            break;
+        };
+        let Ok(model) = ExtendedModel::like(&cal, &best.1.model) else {
+            break;
+        };
+        let train = Context::training(set.series, model, set.blocks, set.w_phi);
+        let refined = crate::refine::refine(
+            &cal,
+            &best.1.model,
+            set.series,
+            set.blocks,
+            set.w_phi,
+            3000,
+            Some(&train),
+        );
+        let Ok(model) = ExtendedModel::like(&refined, &best.1.model) else {
+            break;
+        };
+        let full = Context::new(set.series, model, set.blocks, set.w_phi);
+        let ms = held_out(&full);
+        if full.rows.len() + 5 < best.1.rows.len() || ms >= 0.999 * best_ms {
+            break;
+        }
+        best_ms = ms;
+        best = (refined, full);
+    }
+    best
 }
 
 /// Whether `name` is the reference of the scoring ([`Role::Reference`]).

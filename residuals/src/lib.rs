@@ -10,6 +10,8 @@
 mod acceptance;
 pub mod alignment;
 pub mod attribution;
+pub mod backward;
+pub mod consistency;
 pub mod context;
 pub mod effects;
 pub mod extension;
@@ -21,6 +23,7 @@ pub mod nuisance;
 pub mod options;
 mod plausibility;
 pub mod progress;
+pub mod recalibration;
 pub mod refine;
 pub mod report;
 pub mod scoring;

@@ -23,6 +23,11 @@ pub struct Options {
     /// Where progress is reported (nowhere by default).
     #[serde(skip)]
     pub progress: crate::progress::ProgressSink,
+    /// The static poses of the first calibration, to make it again from the drawing with the
+    /// effects in the model ([`crate::recalibration`]); `None`: the calibration parameters are
+    /// refined linearised only.
+    #[serde(skip)]
+    pub recalibration: Option<std::sync::Arc<crate::recalibration::Recalibration>>,
 }
 
 impl Default for Options {
@@ -35,6 +40,7 @@ impl Default for Options {
             max_geometry_change: 3.0,
             exact: false,
             progress: Default::default(),
+            recalibration: None,
         }
     }
 }

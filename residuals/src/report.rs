@@ -128,6 +128,36 @@ pub fn write_report(dir: &Path, a: &Attribution, inputs: &str) -> Result<PathBuf
             e.name
         );
     }
+    if !a.removed.is_empty() {
+        let _ = writeln!(md, "\n## Taken out by the backward pass\n");
+        for r in &a.removed {
+            let _ = writeln!(
+                md,
+                "- **{}** ({}): with every other effect in, held-out RMS {:.4} mm without it and {:.4} mm with it (p = {:.2e}): {}.",
+                r.name,
+                r.params.iter().map(fmt_param).collect::<Vec<_>>().join(", "),
+                r.held_out_rms_without_mm,
+                r.held_out_rms_with_mm,
+                r.p_value,
+                r.note
+            );
+        }
+    }
+    let imitations: Vec<&str> = a
+        .candidates
+        .iter()
+        .filter(|c| c.note.starts_with("acts partly like"))
+        .map(|c| c.note.as_str())
+        .collect();
+    if !imitations.is_empty() {
+        let _ = writeln!(
+            md,
+            "\n## Not named: parameters that disagree between parts of the data\n"
+        );
+        for n in imitations {
+            let _ = writeln!(md, "- {n}.");
+        }
+    }
     let _ = writeln!(
         md,
         "\n## Every candidate tried\n\n| round | candidate | held-out gain (mm) | p | ΔBIC | accepted | why not |\n|---|---|---|---|---|---|---|"

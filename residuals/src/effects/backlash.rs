@@ -175,6 +175,15 @@ impl Effect for Backlash {
         })
     }
 
+    fn remove(&self, effects: &mut Effects, _params: &[Estimate]) {
+        effects.backlash = None;
+    }
+
+    /// Visible in motion only: the first against the second half of the training time.
+    fn consistency(&self) -> crate::consistency::Parts {
+        crate::consistency::Parts::Halves
+    }
+
     fn file_position(&self) -> u8 {
         2
     }

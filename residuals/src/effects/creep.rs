@@ -157,6 +157,15 @@ impl Effect for Creep {
         })
     }
 
+    fn remove(&self, effects: &mut Effects, _params: &[Estimate]) {
+        effects.creep = None;
+    }
+
+    /// A history effect: the first against the second half of the training time.
+    fn consistency(&self) -> crate::consistency::Parts {
+        crate::consistency::Parts::Halves
+    }
+
     fn file_position(&self) -> u8 {
         3
     }

@@ -120,6 +120,10 @@ impl Effect for Drift {
         })
     }
 
+    fn remove(&self, effects: &mut Effects, _params: &[Estimate]) {
+        effects.drift = None;
+    }
+
     fn file_position(&self) -> u8 {
         4
     }

@@ -93,6 +93,10 @@ impl Effect for Frame {
         })
     }
 
+    fn remove(&self, effects: &mut Effects, _params: &[Estimate]) {
+        effects.frame = None;
+    }
+
     fn file_position(&self) -> u8 {
         7
     }

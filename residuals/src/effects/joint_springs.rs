@@ -46,6 +46,17 @@ impl Effect for JointSprings {
         })
     }
 
+    /// The springs out; the compliance entry goes when it holds no load either.
+    fn remove(&self, effects: &mut Effects, _params: &[Estimate]) {
+        if let Some(c) = &mut effects.compliance {
+            c.k_m_n_mm_per_rad = 0.0;
+            c.k_p_n_mm_per_rad = 0.0;
+            if c.force_n == [0.0; 2] && c.couple_n_mm == 0.0 {
+                effects.compliance = None;
+            }
+        }
+    }
+
     fn file_position(&self) -> u8 {
         6
     }

@@ -86,6 +86,15 @@ impl Effect for Latency {
             .map(|l| vec![Estimate::new("latency", l.latency_s, None, "s")])
     }
 
+    fn remove(&self, effects: &mut Effects, _params: &[Estimate]) {
+        effects.latency = None;
+    }
+
+    /// Visible in motion only: the first against the second half of the training time.
+    fn consistency(&self) -> crate::consistency::Parts {
+        crate::consistency::Parts::Halves
+    }
+
     fn file_position(&self) -> u8 {
         1
     }

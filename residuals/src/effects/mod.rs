@@ -135,6 +135,17 @@ pub trait Effect: Extension {
     /// damping of a linearised step. Nothing by default.
     fn blend(&self, _old: &RobotConfig, _new: &mut RobotConfig, _s: f64) {}
 
+    /// Takes its entry out of the robot file (`params`: the parameters it was added with, which
+    /// name the term of an effect that holds several). Recalibrations cannot be taken out:
+    /// nothing by default.
+    fn remove(&self, _effects: &mut Effects, _params: &[Estimate]) {}
+
+    /// Which independent parts of the training rows its consistency is checked on
+    /// ([`crate::consistency`]): static against moving rows by default.
+    fn consistency(&self) -> crate::consistency::Parts {
+        crate::consistency::Parts::StaticMoving
+    }
+
     /// Why the robot file's entry is not a physical explanation, if it is not; `max_change` is
     /// the largest change of the geometry a plausible explanation makes (mm or degrees).
     /// Nothing by default.

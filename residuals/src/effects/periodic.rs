@@ -167,6 +167,22 @@ impl Effect for Periodic {
         })
     }
 
+    /// The term of the motor and period it was added with (the last term if they match none).
+    fn remove(&self, effects: &mut Effects, params: &[Estimate]) {
+        let value = |n: &str| params.iter().find(|p| p.name == n).map(|p| p.value);
+        let at = effects
+            .periodic
+            .iter()
+            .position(|t| {
+                value("motor").is_some_and(|m| (m - f64::from(t.motor)).abs() < 0.5)
+                    && value("period").is_some_and(|p| (p - t.period_steps).abs() < 1e-6)
+            })
+            .or(effects.periodic.len().checked_sub(1));
+        if let Some(i) = at {
+            effects.periodic.remove(i);
+        }
+    }
+
     fn file_position(&self) -> u8 {
         8
     }

@@ -1,0 +1,146 @@
+//! The backward pass. Effects are added one at a time; an effect added early may have stood in
+//! for one found later (a frame correction that took up what a recalibration bent by a drift
+//! left, before the drift was in). After the forward rounds every physical effect must earn its
+//! place with all the others in, by the same held-out test as for adding it: the model without
+//! it (the other effects and the calibration parameters refitted on the full model, and
+//! recalibrated) against the model with it, paired over the held-out blocks, Bonferroni over the
+//! effects in the model, by more than the smallest effect worth claiming, explaining a good share
+//! of what the model without it leaves above the noise. The effect that earns least and fails is
+//! removed, the others refitted, and the pass repeats until every effect passes.
+
+use crate::acceptance::accept;
+use crate::context::Context;
+use crate::effects::{self, Role};
+use crate::fitted::Estimate;
+use crate::model::ExtendedModel;
+use crate::options::Options;
+use crate::scoring::{paired_p, sse_per_block, MIN_SHARE};
+use crate::series::{Blocks, Series};
+use pcr_robot::RobotConfig;
+use serde::Serialize;
+
+/// An effect the backward pass took out, and why.
+#[derive(Debug, Clone, Serialize)]
+pub struct Removed {
+    /// Vocabulary name.
+    pub name: String,
+    /// The parameters it held.
+    pub params: Vec<Estimate>,
+    /// Held-out RMS of the weighted residual without it and with it, mm.
+    pub held_out_rms_without_mm: f64,
+    /// With it, mm.
+    pub held_out_rms_with_mm: f64,
+    /// One-sided p-value of the paired held-out block test.
+    pub p_value: f64,
+    /// Why it did not earn its place.
+    pub note: String,
+}
+
+/// The model without one effect, and how the model with it compares on held-out rows.
+pub(crate) struct Without<'a> {
+    /// The configuration without the effect, the rest refitted.
+    pub config: RobotConfig,
+    /// Its residuals (training and held-out rows).
+    pub ctx: Context<'a>,
+    /// Held-out weighted mean square per row without the effect and with it, mm^2.
+    pub ms: [f64; 2],
+    /// One-sided p-value that the model with the effect is better, paired over held-out blocks.
+    pub p: f64,
+}
+
+/// What the pass needs of the attribution's setting.
+pub(crate) struct Setting<'s> {
+    pub series: &'s [Series],
+    pub blocks: &'s Blocks,
+    pub opts: &'s Options,
+    pub w_phi: f64,
+    pub noise_ms: f64,
+}
+
+/// The model without the effect `name` added with `params`: its entry taken out of `config`,
+/// the other effects and the calibration parameters refitted on the full model, then the
+/// recalibration (the reference of the forward test) put in where it lowers the training error.
+pub(crate) fn without<'a>(
+    config: &RobotConfig,
+    ctx: &Context<'a>,
+    name: &str,
+    params: &[Estimate],
+    set: &Setting<'a>,
+) -> Option<Without<'a>> {
+    let effect = effects::named(name)?;
+    let mut cfg = config.clone();
+    effect.remove(&mut cfg.effects, params);
+    let model = ExtendedModel::like(&cfg, &ctx.model).ok()?;
+    let train_ctx = Context::training(set.series, model, set.blocks, set.w_phi);
+    let refined = crate::refine::refine(
+        &cfg,
+        &ctx.model,
+        set.series,
+        set.blocks,
+        set.w_phi,
+        3000,
+        Some(&train_ctx),
+    );
+    let model = ExtendedModel::like(&refined, &ctx.model).ok()?;
+    let mut rctx = Context::new(set.series, model, set.blocks, set.w_phi);
+    let mut rcfg = refined;
+    if let Some(g) = effects::reference().and_then(|g| g.fit(&rctx, &rctx.train())) {
+        let progress = crate::progress::ProgressSink::default();
+        if let Some((c, x)) = accept(
+            &rcfg, &rctx, g, set.series, set.blocks, set.w_phi, &progress,
+        ) {
+            rcfg = c;
+            rctx = x;
+        }
+    }
+    let (test_w, test) = (rctx.test(), ctx.test());
+    let nb = set.blocks.len();
+    let a = sse_per_block(&rctx, &test_w, None, nb);
+    let b = sse_per_block(ctx, &test, None, nb);
+    let ms = [
+        a.iter().sum::<f64>() / test_w.len().max(1) as f64,
+        b.iter().sum::<f64>() / test.len().max(1) as f64,
+    ];
+    let p = paired_p(&a, &b, &set.blocks.held_out);
+    Some(Without {
+        config: rcfg,
+        ctx: rctx,
+        ms,
+        p,
+    })
+}
+
+/// Why an effect does not earn its place (`None` when it does): the forward test's rules with
+/// the model without it as the reference. `n_effects`: the physical effects in the model (the
+/// Bonferroni divisor).
+pub(crate) fn fails(w: &Without, n_effects: usize, set: &Setting) -> Option<String> {
+    let alpha = set.opts.alpha / n_effects.max(1) as f64;
+    let red = w.ms[0] - w.ms[1];
+    let gain = red.signum() * red.abs().sqrt();
+    let excess = w.ms[0] - set.noise_ms;
+    let share = if excess > 0.0 { red / excess } else { 0.0 };
+    let mut note = Vec::new();
+    if w.p >= alpha {
+        note.push(format!("p = {:.2e} >= {alpha:.1e}", w.p));
+    }
+    if gain < set.opts.min_effect_mm {
+        note.push(format!(
+            "held-out gain {gain:.4} mm < {} mm",
+            set.opts.min_effect_mm
+        ));
+    }
+    if share < MIN_SHARE {
+        note.push(format!(
+            "explains {:.0} % of what the others leave above the noise (< {:.0} %)",
+            100.0 * share,
+            100.0 * MIN_SHARE
+        ));
+    }
+    (!note.is_empty()).then(|| note.join("; "))
+}
+
+/// Whether the backward pass judges `name`: the physical effects (a recalibration absorbs, it is
+/// not claimed).
+pub(crate) fn judged(name: &str) -> bool {
+    effects::named(name).is_some_and(|e| e.role() == Role::Physical)
+}

@@ -1,0 +1,98 @@
+//! Joint estimation from the drawing. The analysis starts from a calibration made on static
+//! poses with no effect in the model; an effect that was already in those poses (a tendon that
+//! drifts while the calibration set is recorded, a play, a frame error) bent that calibration,
+//! and a fit linearised around it cannot take the bend back. So once an effect is in the
+//! model, the calibration is made again **from the robot file's drawing**, with the effects in
+//! the model: each static pose's motor positions are the ones the model says the legs reached
+//! (drift, creep, play and periodic errors taken off, `Prediction::dl_eff`) and its measurement
+//! is corrected by the model's capture frame; the paper's two steps and their joint refinement
+//! run on those, with the same function and split as the first calibration. The effects are
+//! then refitted on the new calibration ([`crate::refine`]), and the two alternate while the
+//! held-out error falls: the better held-out result, from the calibration the analysis began
+//! with or from the drawing, is kept ([`crate::attribution`]).
+//!
+//! Loads (joint springs, an external wrench) bend the segments themselves, which the static
+//! model cannot take off a measurement: with a compliance in the model the calibration is not
+//! made again (the linearised refinement of the calibration parameters stands).
+
+use crate::context::Context;
+use pcr_calibration::calibrate::{calibrate_data, Options as CalOptions};
+use pcr_calibration::StaticData;
+use pcr_robot::RobotConfig;
+
+/// The static poses the analysis's first calibration was made from, so that it can be made
+/// again with the effects in the model.
+#[derive(Debug, Clone)]
+pub struct Recalibration {
+    /// The static poses.
+    pub data: StaticData,
+    /// Index of their recording among the analysed series.
+    pub series: usize,
+    /// The first calibration's settings.
+    pub options: CalOptions,
+}
+
+/// The calibration made again from `drawing` on the static poses as the model of `ctx` (whose
+/// configuration is `config`) says the robot reached and measured them, with `config`'s effects
+/// kept; `None` when it cannot be made (a compliance in the model, a pose the model does not
+/// predict, a calibration that fails).
+pub fn recalibrated(
+    config: &RobotConfig,
+    ctx: &Context,
+    drawing: &RobotConfig,
+    recal: &Recalibration,
+) -> Option<RobotConfig> {
+    if config.effects.compliance.is_some() {
+        return None;
+    }
+    let series = ctx.series.get(recal.series)?;
+    let preds = ctx.preds.get(recal.series)?;
+    let frame = config.effects.frame.as_ref();
+    let mut data = recal.data.clone();
+    for p in &mut data.poses {
+        let s = &p.settled;
+        // The visit's settled rows with the command it held.
+        let rows: Vec<usize> = (s.first_row..series.samples.len())
+            .take_while(|&k| series.samples[k].settled)
+            .filter(|&k| series.samples[k].q == s.q.map(f64::from))
+            .collect();
+        if rows.is_empty() {
+            return None;
+        }
+        let mut q = [0.0; 3];
+        for (i, qi) in q.iter_mut().enumerate() {
+            let mmps = config.legs[i].actuation.mm_per_step();
+            *qi = rows
+                .iter()
+                .map(|&k| preds.get(k).map_or(f64::NAN, |x| x.dl_eff[i]))
+                .sum::<f64>()
+                / rows.len() as f64
+                / mmps;
+        }
+        if !q.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+        p.q_eff = Some(q);
+        if let Some(f) = frame {
+            let p_settled = &mut p.settled;
+            if let Some(pose) = &mut p_settled.pose {
+                let c = f.apply([pose[0], pose[1], pose[2].to_radians()]);
+                *pose = [c[0], c[1], c[2].to_degrees()];
+            }
+            for m in p_settled.m.iter_mut().flatten() {
+                let c = f.apply([m[0], m[1], 0.0]);
+                *m = [c[0], c[1]];
+            }
+        }
+    }
+    let function = config.legs[0].tendon_map.model;
+    let opts = CalOptions {
+        function: Some(function),
+        ..recal.options.clone()
+    };
+    let cal = calibrate_data(drawing, &data, &opts).ok()?;
+    let mut out = cal.robot;
+    out.name = config.name.clone();
+    out.effects = config.effects.clone();
+    Some(out)
+}
