@@ -111,3 +111,24 @@ def test_the_done_when_example():
     assert r.status[0] == "ok"
     text = repr(r)
     assert "q1" in text and "status" in text
+
+
+def test_batch_ik_releases_the_gil():
+    """Another Python thread runs while the batch IK runs."""
+    import threading
+
+    robot = pcr.Robot.nominal()
+    big = np.tile(poses(), (600, 1))  # about 300 000 poses
+    done = threading.Event()
+
+    def work():
+        robot.ik(big)
+        done.set()
+
+    t = threading.Thread(target=work)
+    ticks = 0
+    t.start()
+    while not done.is_set():
+        ticks += 1
+    t.join()
+    assert ticks > 10_000, ticks
