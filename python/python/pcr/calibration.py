@@ -116,12 +116,13 @@ class Calibration:
         return str(self._native.write_report(os.fspath(directory)))
 
     def __repr__(self) -> str:
-        t = self.after
-        test = t.loc["test", "position_rms_mm"] if "test" in t.index else float("nan")
+        split = "test" if "test" in self.after.index else "train"
+        before = self.before.loc[split, "position_rms_mm"]
+        after = self.after.loc[split, "position_rms_mm"]
+        name = self.table1.loc[self.selected, "name"]
         return (
-            f"pcr.Calibration(function {self.selected} ({self.table1.loc[self.selected, 'name']}), "
-            f"platform position RMS on the test poses {self.before.loc['test', 'position_rms_mm'] if 'test' in self.before.index else float('nan'):.3f}"
-            f" -> {test:.3f} mm)"
+            f"pcr.Calibration(function {self.selected} ({name}); platform position RMS on the "
+            f"{split} poses {before:.3f} -> {after:.3f} mm)"
         )
 
 
