@@ -6,6 +6,10 @@ implementation (pcr-calibration). Written independently from the description in
 docs/calibration.md, not translated from the Rust code.
 
 usage: calib_scipy.py REC.csv [--json OUT.json] [--params paper|extended]
+                        [--reading symmetric|asymmetric]
+
+--reading asymmetric fits each form with separate coefficients per bending direction sharing
+the offset k0 (docs/calibration.md, "Table I in two readings").
 
 The recording must carry a `set` column (train/test) so both tools use the same split.
 Prints Table I (train/test RMS of M_i), the selected function, the platform errors after
@@ -32,9 +36,20 @@ NOMINAL = [dict(r_base=285.0, beta=210.0 + 120.0 * i, psi=120.0 * i, l_c=125.0, 
 MM_PER_STEP = 2.0 * math.pi * 5.0 / 2048.0
 
 
-def basis(kind, dl):
+def basis(kind, dl, reading="symmetric"):
     """Columns of the basis functions (odd extension), without the constant for the
-    families without an offset."""
+    families without an offset. Asymmetric: the constant, then every other column once for
+    dl >= 0 and once for dl < 0."""
+    cols = odd_basis(kind, dl)
+    if reading == "symmetric":
+        return cols
+    offset = kind not in ("linear", "log")
+    shared, terms = (cols[:1], cols[1:]) if offset else ([], cols)
+    pos = (np.asarray(dl) >= 0).astype(float)
+    return shared + [c * pos for c in terms] + [c * (1.0 - pos) for c in terms]
+
+
+def odd_basis(kind, dl):
     a = np.abs(dl)
     s = np.sign(dl)
     lg = s * np.log1p(a)
@@ -62,8 +77,8 @@ def basis(kind, dl):
     raise ValueError(kind)
 
 
-def kappa(kind, k, dl):
-    return sum(c * b for c, b in zip(k, basis(kind, dl)))
+def kappa(kind, k, dl, reading="symmetric"):
+    return sum(c * b for c, b in zip(k, basis(kind, dl, reading)))
 
 
 def arc(theta):
@@ -149,7 +164,7 @@ def theta_of_m(leg, m):
     return th
 
 
-def fit_leg(i, kind, train, test, extended):
+def fit_leg(i, kind, train, test, extended, reading):
     nom = NOMINAL[i]
     names = ["psi", "l_c"] + (["r_base", "beta"] if extended else [])
     x0 = [nom[n] for n in names]
@@ -158,8 +173,9 @@ def fit_leg(i, kind, train, test, extended):
     dl = np.array([o[0] for o in train])
     mm = np.array([o[1] for o in train])
     kap = np.array([theta_of_m(nom, m) / nom["l_c"] for m in mm])
-    A = np.column_stack(basis(kind, dl))
+    A = np.column_stack(basis(kind, dl, reading))
     sc = np.linalg.norm(A, axis=0)
+    sc[sc == 0.0] = 1.0
     coef = np.linalg.lstsq(A / sc, kap, rcond=None)[0] / sc
     x0 = np.array(x0 + list(coef))
     lo = np.array(lo + [-np.inf] * len(coef))
@@ -173,7 +189,7 @@ def fit_leg(i, kind, train, test, extended):
 
     def res(x):
         leg, k = leg_of(x)
-        mx, my = joint_m(leg, kappa(kind, k, dl))
+        mx, my = joint_m(leg, kappa(kind, k, dl, reading))
         return np.concatenate([mx - mm[:, 0], my - mm[:, 1]])
 
     r = least_squares(res, x0, bounds=(lo, hi), method="trf", x_scale="jac")
@@ -184,17 +200,17 @@ def fit_leg(i, kind, train, test, extended):
             return None
         d = np.array([o[0] for o in obs])
         m = np.array([o[1] for o in obs])
-        mx, my = joint_m(leg, kappa(kind, k, d))
+        mx, my = joint_m(leg, kappa(kind, k, d, reading))
         return float(np.sqrt(np.mean((mx - m[:, 0]) ** 2 + (my - m[:, 1]) ** 2)))
 
     return dict(leg=leg, k=k, train=rms(train), test=rms(test), nfev=int(r.nfev))
 
 
-def fk(legs, kinds, ks, q, guess):
+def fk(legs, kinds, ks, q, guess, reading):
     """Platform pose for motor positions q: Newton on the loop closures from `guess`."""
     m = []
     for i in range(3):
-        kap = kappa(kinds, ks[i], np.array([q[i] * MM_PER_STEP]))[0]
+        kap = kappa(kinds, ks[i], np.array([q[i] * MM_PER_STEP]), reading)[0]
         m.append(joint_m(legs[i], kap))
     x = np.array([guess[0], guess[1], math.radians(guess[2])])
     for _ in range(30):
@@ -220,6 +236,7 @@ def main():
     ap.add_argument("recording")
     ap.add_argument("--json")
     ap.add_argument("--params", default="paper", choices=["paper", "extended"])
+    ap.add_argument("--reading", default="symmetric", choices=["symmetric", "asymmetric"])
     a = ap.parse_args()
     data = read_static(a.recording)
     t0 = time.perf_counter()
@@ -230,11 +247,19 @@ def main():
         for i in range(3):
             tr = [(g["q"][i] * MM_PER_STEP, g["m"][i]) for g in data if g["set"] == "train" and g["m"][i] is not None]
             te = [(g["q"][i] * MM_PER_STEP, g["m"][i]) for g in data if g["set"] == "test" and g["m"][i] is not None]
-            f = fit_leg(i, kind, tr, te, extended)
+            if a.reading == "asymmetric":
+                # As pcr: each direction needs more points than its coefficients.
+                need = NCOEF[kind] - (0 if kind in ("linear", "log") else 1) + 1
+                if min(sum(o[0] < 0 for o in tr), sum(o[0] > 0 for o in tr)) < need:
+                    break
+            f = fit_leg(i, kind, tr, te, extended, a.reading)
             f["n_train"], f["n_test"] = len(tr), len(te)
             legs.append(f)
+        if len(legs) < 3:
+            continue
         pool = lambda key, n: math.sqrt(sum(f[key] ** 2 * f[n] for f in legs) / sum(f[n] for f in legs))
-        table.append(dict(index=KINDS.index(kind) + 1, name=kind, train_rms_mm=pool("train", "n_train"),
+        table.append(dict(index=KINDS.index(kind) + 1, name=kind, reading=a.reading,
+                          train_rms_mm=pool("train", "n_train"),
                           test_rms_mm=pool("test", "n_test"), legs=legs))
     best = min(table, key=lambda r: r["test_rms_mm"])
     kind = best["name"]
@@ -257,7 +282,7 @@ def main():
     def errors(ls, poses):
         out = []
         for g in poses:
-            p = fk(ls, kind, ks, g["q"], g["pose"])
+            p = fk(ls, kind, ks, g["q"], g["pose"], a.reading)
             dphi = (p[2] - g["pose"][2] + 180.0) % 360.0 - 180.0
             out.append((p[0] - g["pose"][0], p[1] - g["pose"][1], dphi))
         return np.array(out)

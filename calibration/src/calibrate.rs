@@ -1,9 +1,11 @@
 //! The paper's two-step calibration of a whole robot from one recording.
 //!
 //! 1. Static poses and their split ([`StaticData`]).
-//! 2. Step 1 for each of the 13 Table I functions and each leg ([`crate::step1`]); the function
+//! 2. Step 1 for each of the 13 Table I functions, in both readings (symmetric: the odd
+//!    extension; asymmetric: coefficients per bending direction), and each leg
+//!    ([`crate::step1`]). Each leg takes the reading with its lower test RMS of M_i; the function
 //!    with the lowest test RMS of M_i over the three legs is selected (one function for all legs,
-//!    as in the paper), unless one is forced.
+//!    as in the paper), unless one is forced. [`Readings`] restricts the readings.
 //! 3. Step 2 with the selected legs fixed ([`crate::step2`]).
 //! 4. With [`Method::Joint`] (the default), every parameter of both steps refined together on
 //!    the M_i and the platform poses ([`crate::joint`]); [`Method::Paper`] stops after step 2.
@@ -11,12 +13,13 @@
 //!    starting robot on the training and the test poses, beside the paper's two-step robot.
 
 use crate::data::{DataError, SplitSource, StaticData};
+use crate::diagnosis::{diagnose, Diagnosis};
 use crate::joint::{self, JointFit, JointObservations, JointParams};
 use crate::step1::{self, FreeGeometry, LegFit, LegObservation, Step1Error};
 use crate::step2::{self, PoseErrors, PoseObservation, Step2Error, Step2Fit, Step2Params};
 use pcr_kinematics::Robot;
 use pcr_recording::{Recording, Split};
-use pcr_robot::{RobotConfig, TendonMapKind};
+use pcr_robot::{MapForm, MapReading, RobotConfig, TendonMapKind};
 use serde::Serialize;
 
 /// Which parameter sets the two steps free.
@@ -56,6 +59,31 @@ pub enum Method {
     Paper,
 }
 
+/// Which readings of the Table I forms are fitted, and how one is chosen.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Readings {
+    /// Both readings; each leg takes the one with its lower held-out error of M_i (a lab cannot
+    /// know in advance whether its legs bend alike both ways).
+    #[default]
+    PerLeg,
+    /// The symmetric reading only (the odd extension: the paper's forms as before).
+    Symmetric,
+    /// The asymmetric reading only (coefficients per bending direction).
+    Asymmetric,
+}
+
+impl Readings {
+    /// The readings fitted.
+    pub fn fitted(self) -> &'static [MapReading] {
+        match self {
+            Readings::PerLeg => &MapReading::ALL,
+            Readings::Symmetric => &[MapReading::Symmetric],
+            Readings::Asymmetric => &[MapReading::Asymmetric],
+        }
+    }
+}
+
 /// Settings of a calibration.
 #[derive(Debug, Clone, Serialize)]
 pub struct Options {
@@ -65,6 +93,8 @@ pub struct Options {
     pub method: Method,
     /// Use this Table I function instead of selecting by test RMS.
     pub function: Option<TendonMapKind>,
+    /// Which readings of the forms are fitted and chosen from.
+    pub reading: Readings,
     /// Weight of one degree of orientation error in step 2, mm (None: r_p pi / 180).
     pub phi_weight_mm_per_deg: Option<f64>,
     /// Seed of the random split (recordings without a `set` column).
@@ -79,6 +109,7 @@ impl Default for Options {
             parameters: ParameterSet::Paper,
             method: Method::Joint,
             function: None,
+            reading: Readings::PerLeg,
             phi_weight_mm_per_deg: None,
             seed: 1,
             test_fraction: 1.0 / 3.0,
@@ -121,7 +152,23 @@ pub enum CalibError {
     },
 }
 
-/// One row of Table I: a function fitted to the three legs.
+/// One function in one reading fitted to the three legs.
+#[derive(Debug, Clone, Serialize)]
+pub struct ReadingFit {
+    /// The reading.
+    pub reading: MapReading,
+    /// Per-leg fits, leg order (absent where the fit failed: see `errors`).
+    pub legs: Vec<LegFit>,
+    /// Why a leg could not be fitted (one line each, naming the leg).
+    pub errors: Vec<String>,
+    /// RMS of |M^ - M| over the three legs' training points, mm (all three legs fitted).
+    pub train_rms_mm: Option<f64>,
+    /// RMS over the test points, mm.
+    pub test_rms_mm: Option<f64>,
+}
+
+/// One row of Table I: a function fitted to the three legs in each reading, and the reading
+/// each leg would take.
 #[derive(Debug, Clone, Serialize)]
 pub struct TableRow {
     /// Table I number (1..13).
@@ -130,21 +177,65 @@ pub struct TableRow {
     pub name: &'static str,
     /// The paper's form.
     pub form: &'static str,
-    /// The form as evaluated for every dl.
+    /// The form as evaluated for every dl in the symmetric reading.
     pub extended_form: &'static str,
-    /// Per-leg fits (absent where the fit failed).
-    pub legs: Vec<LegFit>,
-    /// RMS of |M^ - M| over the three legs' training points, mm.
+    /// The fits per reading ([`Options::reading`] decides which are made).
+    pub readings: Vec<ReadingFit>,
+    /// The reading each leg takes in this row: among its selectable fits, the one with the
+    /// lower test RMS of M_i (AIC without test points).
+    pub chosen: Vec<MapReading>,
+    /// RMS of |M^ - M| of the chosen fits over the three legs' training points, mm.
     pub train_rms_mm: Option<f64>,
-    /// RMS over the test points, mm.
+    /// RMS of the chosen fits over the test points, mm.
     pub test_rms_mm: Option<f64>,
-    /// Whether all three fits converged.
+    /// Whether every chosen fit converged.
     pub converged: bool,
-    /// Whether all three maps are monotonic over the data's range and invertible up to the
-    /// robot's bending limit (else not selectable).
+    /// Whether every leg has a selectable fit: converged, and a map monotonic over the data's
+    /// range and invertible up to the robot's bending limit.
     pub monotonic: bool,
-    /// Why a fit failed.
+    /// Why the row cannot be used (a leg without any selectable fit).
     pub error: Option<String>,
+}
+
+impl TableRow {
+    /// The chosen fit of each leg (leg order; fewer than three when a leg has none).
+    pub fn chosen_legs(&self) -> Vec<LegFit> {
+        (0..3)
+            .filter_map(|i| {
+                let reading = *self.chosen.get(i)?;
+                self.fit(reading, i).cloned()
+            })
+            .collect()
+    }
+
+    /// The fit of leg `i` (0-based) in `reading`, if it was made and succeeded.
+    pub fn fit(&self, reading: MapReading, i: usize) -> Option<&LegFit> {
+        self.readings
+            .iter()
+            .find(|r| r.reading == reading)?
+            .legs
+            .iter()
+            .find(|f| f.leg == Some(i))
+    }
+
+    /// The fits of one reading.
+    pub fn reading(&self, reading: MapReading) -> Option<&ReadingFit> {
+        self.readings.iter().find(|r| r.reading == reading)
+    }
+
+    /// The chosen readings as text: `symmetric` when every leg takes it, else one per leg.
+    pub fn chosen_text(&self) -> String {
+        match self.chosen.first() {
+            Some(r) if self.chosen.iter().all(|c| c == r) => r.to_string(),
+            _ => self
+                .chosen
+                .iter()
+                .enumerate()
+                .map(|(i, r)| format!("leg {}: {r}", i + 1))
+                .collect::<Vec<_>>()
+                .join(", "),
+        }
+    }
 }
 
 /// Model accuracy on a set of static poses.
@@ -198,6 +289,8 @@ pub struct Calibration {
     pub table1: Vec<TableRow>,
     /// The function used.
     pub selected: usize,
+    /// The reading of each leg's map.
+    pub selected_readings: Vec<MapReading>,
     /// Why it was used.
     pub selected_by: String,
     /// Step 1 of the selected function, per leg.
@@ -216,6 +309,9 @@ pub struct Calibration {
     pub after: SplitAccuracy,
     /// Things the user should know (correlated parameters, parameters on bounds, ...).
     pub warnings: Vec<String>,
+    /// Why the held-out error stays far above the capture noise, when it does
+    /// ([`crate::diagnosis`]).
+    pub diagnosis: Option<Diagnosis>,
     /// The robot of the paper's two steps.
     #[serde(skip)]
     pub paper_robot: RobotConfig,
@@ -345,11 +441,20 @@ pub fn calibrate_data(
             leg_observations(start, data, i, Split::Test),
         )
     });
-    let table1 = table_one(start, &obs, opts.parameters.step1());
     let has_test = obs.iter().all(|o| !o.1.is_empty());
+    let travel = leg_travels(start, data);
+    let table1 = table_one(
+        start,
+        &obs,
+        &travel,
+        opts.parameters.step1(),
+        opts.reading,
+        has_test,
+    );
     let (selected, selected_by) =
         select_function(&table1, opts.function, has_test, &origin, &mut warnings)?;
-    let step1_fits = table1[selected - 1].legs.clone();
+    let step1_fits = table1[selected - 1].chosen_legs();
+    let selected_readings = table1[selected - 1].chosen.clone();
     let legs_robot = apply_step1(start, &step1_fits, &mut warnings);
     let w = opts
         .phi_weight_mm_per_deg
@@ -370,7 +475,7 @@ pub fn calibrate_data(
             let free = JointParams {
                 legs: opts.parameters.step1(),
                 platform: opts.parameters.step2(),
-                kind: step1_fits[0].kind,
+                forms: std::array::from_fn(|i| paper_robot.legs[i].tendon_map.form()),
             };
             let train: [Vec<LegObservation>; 3] = std::array::from_fn(|i| obs[i].0.clone());
             let joint_obs = JointObservations {
@@ -380,17 +485,19 @@ pub fn calibrate_data(
             refine_jointly(start, &paper_robot, free, joint_obs, w, data, &mut warnings)
         }
     };
-    let used = joint_usable(joint.as_ref(), start, &origin, &obs, &mut warnings);
+    let used = joint_usable(joint.as_ref(), &travel, &origin, &obs, &mut warnings);
     let (robot, after) = match (used, &joint) {
         (Method::Joint, Some(j)) => (j.fit.config.clone(), j.accuracy),
         _ => (paper_robot.clone(), paper),
     };
     compare_with_paper(joint.as_ref(), &paper, &mut warnings);
+    let diagnosis = diagnose(&robot, data);
     Ok(Calibration {
         data: summary(data),
         options: opts.clone(),
         table1,
         selected,
+        selected_readings,
         selected_by,
         step1: step1_fits,
         step2: s2,
@@ -400,6 +507,7 @@ pub fn calibrate_data(
         before: split_accuracy(start, data),
         after,
         warnings,
+        diagnosis,
         paper_robot,
         robot,
     })
@@ -463,59 +571,199 @@ fn note_moved_rows(data: &StaticData, warnings: &mut Vec<String>) {
     }
 }
 
-/// Table I: step 1 of every function on the three legs.
-fn table_one(start: &RobotConfig, obs: &LegSets, free: FreeGeometry) -> Vec<TableRow> {
+/// The curvature range (1/mm) each leg's map must invert: the travel the starting robot's
+/// workspace asks of the leg at the orientations of the recording's static poses (the smallest,
+/// zero and the largest, to the degree; `pcr_kinematics::workspace::leg_travel`, a 4 mm grid),
+/// or the bending limit where no pose of that workspace is feasible.
+pub fn leg_travels(start: &RobotConfig, data: &StaticData) -> [[f64; 2]; 3] {
+    let limit = |i: usize| {
+        let k = start.limits.bending_max_deg.to_radians() / start.legs[i].l_c_mm;
+        [-k, k]
+    };
+    let (lo, hi) = data
+        .poses
+        .iter()
+        .filter_map(|p| p.settled.pose.map(|x| x[2].round()))
+        .fold((0.0f64, 0.0f64), |a, p| (a.0.min(p), a.1.max(p)));
+    let mut orientations = vec![lo.to_radians(), 0.0, hi.to_radians()];
+    orientations.dedup();
+    Robot::new(start)
+        .ok()
+        .and_then(|r| pcr_kinematics::workspace::leg_travel(&r, &orientations, 4.0))
+        .unwrap_or_else(|| std::array::from_fn(limit))
+}
+
+/// Table I: step 1 of every function, in the readings of `readings`, on the three legs.
+fn table_one(
+    start: &RobotConfig,
+    obs: &LegSets,
+    travel: &[[f64; 2]; 3],
+    free: FreeGeometry,
+    readings: Readings,
+    has_test: bool,
+) -> Vec<TableRow> {
     TendonMapKind::ALL
         .iter()
-        .map(|&kind| table_row(start, obs, free, kind))
+        .map(|&kind| table_row(start, obs, travel, free, kind, readings, has_test))
         .collect()
 }
 
-/// Step 1 of one function on the three legs (stops at the first leg that fails).
+/// Step 1 of one function in each reading on the three legs, and each leg's choice.
 fn table_row(
     start: &RobotConfig,
     obs: &LegSets,
+    travel: &[[f64; 2]; 3],
     free: FreeGeometry,
     kind: TendonMapKind,
+    readings: Readings,
+    has_test: bool,
 ) -> TableRow {
-    let mut legs = Vec::with_capacity(3);
+    let fits: Vec<ReadingFit> = readings
+        .fitted()
+        .iter()
+        .map(|&reading| reading_fit(start, obs, travel, free, MapForm { kind, reading }))
+        .collect();
+    // Each leg: the selectable fit with the lower held-out error (AIC without test points).
+    let score = |f: &LegFit| {
+        if has_test {
+            f.test_rms_mm.unwrap_or(f64::INFINITY)
+        } else {
+            leg_aic(f)
+        }
+    };
+    let mut chosen = Vec::with_capacity(3);
     let mut error = None;
     for i in 0..3 {
-        let what = format!("leg {}", i + 1);
-        let (train, test) = &obs[i];
-        match step1::fit_leg(&what, Some(i), &start.legs[i], free, kind, train, test) {
-            Ok(f) => legs.push(f),
-            Err(e) => {
-                error = Some(e.to_string());
+        let best = fits
+            .iter()
+            .filter_map(|r| r.legs.iter().find(|f| f.leg == Some(i)))
+            .filter(|f| f.converged && f.refused.is_none())
+            .min_by(|a, b| score(a).total_cmp(&score(b)));
+        match best {
+            Some(f) => chosen.push(f.reading),
+            None => {
+                let why: Vec<String> = fits
+                    .iter()
+                    .flat_map(|r| {
+                        r.errors.iter().cloned().chain(
+                            r.legs
+                                .iter()
+                                .filter(|f| f.leg == Some(i))
+                                .map(|f| leg_unusable(f, kind)),
+                        )
+                    })
+                    .collect();
+                error.get_or_insert_with(|| why.join("; "));
                 break;
             }
         }
     }
     let complete = error.is_none();
-    TableRow {
+    let mut row = TableRow {
         index: kind.table_index(),
         name: kind.name(),
         form: kind.paper_form(),
         extended_form: kind.extended_form(),
-        train_rms_mm: complete.then(|| pooled(&legs, false)).flatten(),
-        test_rms_mm: complete.then(|| pooled(&legs, true)).flatten(),
-        converged: complete && legs.iter().all(|f| f.converged),
-        monotonic: complete
-            && legs
-                .iter()
-                .all(|f| f.monotonic && map_reaches_limit(&f.config, start.limits.bending_max_deg)),
-        legs,
+        readings: fits,
+        chosen,
+        train_rms_mm: None,
+        test_rms_mm: None,
+        converged: complete,
+        monotonic: complete,
         error,
+    };
+    if complete {
+        let legs = row.chosen_legs();
+        row.train_rms_mm = pooled(&legs, false);
+        row.test_rms_mm = pooled(&legs, true);
+    }
+    row
+}
+
+/// Why a leg's fit cannot be chosen.
+fn leg_unusable(f: &LegFit, kind: TendonMapKind) -> String {
+    let label = MapForm {
+        kind,
+        reading: f.reading,
+    }
+    .label();
+    let leg = f.leg.map_or(0, |i| i + 1);
+    match &f.refused {
+        Some(r) => format!("leg {leg}: function {label}: {r}"),
+        None => format!(
+            "leg {leg}: function {label}: the fit did not converge ({} after {} evaluations)",
+            f.status, f.evaluations
+        ),
     }
 }
 
-/// Whether a leg's map can be inverted up to the bending limit.
-fn map_reaches_limit(leg: &pcr_robot::LegConfig, bending_max_deg: f64) -> bool {
-    step1::reaches_bending_limit(
+/// One function in one reading on the three legs; each map is checked for the IK (its
+/// `refused` says why it cannot serve).
+fn reading_fit(
+    start: &RobotConfig,
+    obs: &LegSets,
+    travel: &[[f64; 2]; 3],
+    free: FreeGeometry,
+    form: MapForm,
+) -> ReadingFit {
+    let mut legs = Vec::with_capacity(3);
+    let mut errors = Vec::new();
+    for i in 0..3 {
+        let what = format!("leg {}", i + 1);
+        let (train, test) = &obs[i];
+        match step1::fit_leg(&what, Some(i), &start.legs[i], free, form, train, test) {
+            Ok(mut f) => {
+                f.refused = map_refusal(&f.config, travel[i], &obs[i]);
+                legs.push(f);
+            }
+            Err(e) => errors.push(e.to_string()),
+        }
+    }
+    let complete = legs.len() == 3;
+    ReadingFit {
+        reading: form.reading,
+        train_rms_mm: complete.then(|| pooled(&legs, false)).flatten(),
+        test_rms_mm: complete.then(|| pooled(&legs, true)).flatten(),
+        legs,
+        errors,
+    }
+}
+
+/// The tendon displacements of a leg's observations (both splits), mm.
+fn dl_range(obs: &(Vec<LegObservation>, Vec<LegObservation>)) -> (f64, f64) {
+    obs.0
+        .iter()
+        .chain(&obs.1)
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |a, o| {
+            (a.0.min(o.dl_mm), a.1.max(o.dl_mm))
+        })
+}
+
+/// Why a leg's map cannot serve the IK over the leg's travel (`None` when it can): the map must
+/// be strictly monotonic over the data's displacements widened by 10 % and invertible over the
+/// curvatures the workspace asks of the leg (`travel`, 1/mm) widened by 10 %.
+fn map_refusal(
+    leg: &pcr_robot::LegConfig,
+    travel: [f64; 2],
+    obs: &(Vec<LegObservation>, Vec<LegObservation>),
+) -> Option<String> {
+    let (lo, hi) = dl_range(obs);
+    step1::map_coverage(
         &pcr_kinematics::TendonMap::from_spec(&leg.tendon_map),
         leg.l_c_mm,
-        bending_max_deg,
+        travel,
+        lo,
+        hi,
     )
+    .err()
+}
+
+/// Akaike information criterion of one leg's fit on its training points (two coordinates per
+/// point, Gaussian errors).
+fn leg_aic(f: &LegFit) -> f64 {
+    let n = 2 * f.n_train;
+    let rss = f.train_rms_mm.powi(2) * n as f64 / 2.0;
+    n as f64 * (rss / n as f64).ln() + 2.0 * f.params.len() as f64
 }
 
 /// The function to use: forced, or the selectable one with the lowest test RMS of M_i (the
@@ -566,27 +814,15 @@ fn check_forced(row: &TableRow, origin: &str) -> Result<(), CalibError> {
             reasons: format!("  {e}"),
         });
     }
-    if let Some(f) = row.legs.iter().find(|f| !f.converged) {
-        return Err(CalibError::NoFunction {
-            origin: origin.to_string(),
-            reasons: format!(
-                "  leg {}: function {} ({}): the fit did not converge ({} after {} evaluations)",
-                f.leg.map_or(0, |i| i + 1),
-                row.index,
-                row.name,
-                f.status,
-                f.evaluations
-            ),
-        });
-    }
     Ok(())
 }
 
 /// Akaike information criterion of a Table I row on its training points (two coordinates per
 /// point, Gaussian errors).
 fn aic(r: &TableRow) -> f64 {
-    let n: usize = r.legs.iter().map(|f| 2 * f.n_train).sum();
-    let k: usize = r.legs.iter().map(|f| f.params.len()).sum();
+    let legs = r.chosen_legs();
+    let n: usize = legs.iter().map(|f| 2 * f.n_train).sum();
+    let k: usize = legs.iter().map(|f| f.params.len()).sum();
     let rss = r.train_rms_mm.unwrap_or(f64::INFINITY).powi(2) * n as f64 / 2.0;
     n as f64 * (rss / n as f64).ln() + 2.0 * k as f64
 }
@@ -601,10 +837,7 @@ fn no_function_reasons(table1: &[TableRow]) -> String {
                 "  function {} ({}): the fit did not converge",
                 r.index, r.name
             ),
-            None => format!(
-                "  function {} ({}): the fitted map turns back inside the data's range or cannot be inverted up to the bending limit",
-                r.index, r.name
-            ),
+            None => format!("  function {} ({}): not selectable", r.index, r.name),
         })
         .collect::<Vec<_>>()
         .join("\n")
@@ -680,7 +913,7 @@ fn refine_jointly(
 /// warning saying why).
 fn joint_usable(
     joint: Option<&JointResult>,
-    start: &RobotConfig,
+    travel: &[[f64; 2]; 3],
     origin: &str,
     obs: &LegSets,
     warnings: &mut Vec<String>,
@@ -691,7 +924,7 @@ fn joint_usable(
     let reason = check_usable(&j.fit.config, origin)
         .err()
         .map(|e| e.to_string())
-        .or_else(|| maps_not_invertible(&j.fit.config, start, obs));
+        .or_else(|| maps_not_invertible(&j.fit.config, travel, obs));
     match reason {
         Some(r) => {
             warnings.push(format!(
@@ -703,26 +936,15 @@ fn joint_usable(
     }
 }
 
-/// Why a robot's maps cannot serve the IK over the data's displacements (10 % margin) and up
-/// to the bending limit (`None` when they can).
-fn maps_not_invertible(robot: &RobotConfig, start: &RobotConfig, obs: &LegSets) -> Option<String> {
+/// Why a robot's maps cannot serve the IK over the data's displacements and the legs' travel
+/// (`None` when they can).
+fn maps_not_invertible(
+    robot: &RobotConfig,
+    travel: &[[f64; 2]; 3],
+    obs: &LegSets,
+) -> Option<String> {
     robot.legs.iter().enumerate().find_map(|(i, leg)| {
-        let (lo, hi) = obs[i]
-            .0
-            .iter()
-            .chain(&obs[i].1)
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |a, o| {
-                (a.0.min(o.dl_mm), a.1.max(o.dl_mm))
-            });
-        let map = pcr_kinematics::TendonMap::from_spec(&leg.tendon_map);
-        let ok = step1::is_monotonic(&map, lo, hi)
-            && map_reaches_limit(leg, start.limits.bending_max_deg);
-        (!ok).then(|| {
-            format!(
-                "leg {}: the refined map turns back inside the data's range or cannot be inverted up to the bending limit",
-                i + 1
-            )
-        })
+        map_refusal(leg, travel[i], &obs[i]).map(|r| format!("leg {}: the refined map {r}", i + 1))
     })
 }
 
@@ -780,7 +1002,11 @@ fn check_usable(robot: &RobotConfig, origin: &str) -> Result<(), CalibError> {
             l.r_p_mm,
             l.theta_p_deg,
         ];
-        if v.iter().chain(&l.tendon_map.coeffs).any(|x| !x.is_finite()) {
+        if v.iter()
+            .chain(&l.tendon_map.coeffs)
+            .chain(&l.tendon_map.coeffs_neg)
+            .any(|x| !x.is_finite())
+        {
             return Err(invalid(format!("leg {} has a non-finite parameter", i + 1)));
         }
     }
@@ -798,7 +1024,7 @@ pub fn robot_file(cal: &Calibration, created: &str) -> String {
     let mut s = format!(
         "# Calibrated robot written by `pcr calibrate` ({created}).\n\
          # Data: {} ({} static poses: {} train, {} test).\n\
-         # Tendon map: Table I function {} ({}), {}.\n\
+         # Tendon map: Table I function {} ({}; {}), {}.\n\
          # Parameters freed: {:?}; {}. Test RMS of M_i {} mm; platform position RMS on the\n\
          # test set {} mm (before: {} mm; the paper's two steps: {} mm).\n\
          # Use it as `robot = \"<this file>\"` in a supervisor configuration.\n",
@@ -808,6 +1034,7 @@ pub fn robot_file(cal: &Calibration, created: &str) -> String {
         cal.data.test,
         best.index,
         best.name,
+        best.chosen_text(),
         cal.selected_by,
         cal.options.parameters,
         match cal.used {

@@ -19,7 +19,7 @@ use crate::params::ParamBox;
 use crate::step1::{self, coeff_unit, describe, Correlated, FreeGeometry, LegObservation, Param};
 use crate::step2::{self, PoseObservation, Step2Params};
 use pcr_kinematics::{Leg, Robot};
-use pcr_robot::{RobotConfig, TendonMapKind};
+use pcr_robot::{MapForm, RobotConfig};
 use serde::Serialize;
 use std::ops::Range;
 
@@ -30,8 +30,8 @@ pub struct JointParams {
     pub legs: FreeGeometry,
     /// The platform parameters of step 2.
     pub platform: Step2Params,
-    /// The tendon-map function of all three legs.
-    pub kind: TendonMapKind,
+    /// The tendon-map function and reading of each leg.
+    pub forms: [MapForm; 3],
 }
 
 /// The training observations of the joint fit.
@@ -83,15 +83,15 @@ pub enum JointError {
         /// Parameters.
         params: usize,
     },
-    /// The legs of the two-step result do not all use `kind`'s map.
+    /// A leg of the two-step result does not use the map its form names.
     #[error("joint refinement: leg {leg} uses map {found}, expected {expected}")]
     MixedMaps {
         /// The leg (1..3).
         leg: usize,
         /// Its map.
-        found: TendonMapKind,
+        found: MapForm,
         /// The map of the fit.
-        expected: TendonMapKind,
+        expected: MapForm,
     },
     /// The model cannot be evaluated at the start or the solver failed.
     #[error("joint refinement: {0}")]
@@ -103,24 +103,26 @@ pub enum JointError {
 #[derive(Debug, Clone, Copy)]
 struct Layout {
     free: JointParams,
-    per_leg: usize,
+    /// Start of each leg's parameters, and of the platform's.
+    starts: [usize; 4],
 }
 
 impl Layout {
     fn new(free: JointParams, start: &RobotConfig) -> Layout {
         let geometry = free.legs.params(&start.legs[0]).len();
-        Layout {
-            free,
-            per_leg: geometry + free.kind.n_coeffs(),
+        let mut starts = [0; 4];
+        for i in 0..3 {
+            starts[i + 1] = starts[i] + geometry + free.forms[i].n_coeffs();
         }
+        Layout { free, starts }
     }
 
     fn leg(&self, i: usize) -> Range<usize> {
-        i * self.per_leg..(i + 1) * self.per_leg
+        self.starts[i]..self.starts[i + 1]
     }
 
     fn platform(&self) -> std::ops::RangeFrom<usize> {
-        3 * self.per_leg..
+        self.starts[3]..
     }
 
     /// `base` with the parameters of `x`.
@@ -130,7 +132,7 @@ impl Layout {
             c.legs[i] = step1::leg_of(
                 &base.legs[i],
                 self.free.legs,
-                self.free.kind,
+                self.free.forms[i],
                 &x[self.leg(i)],
             );
         }
@@ -171,10 +173,11 @@ fn leg_box(
     for (v, g) in values.iter().zip(free.legs.params(bounds_of)) {
         b.push(format!("{}[{}]", g.0, i + 1), g.1, v.2, g.3, g.4);
     }
-    for (j, c) in from.tendon_map.coeffs.iter().enumerate() {
+    let form = free.forms[i];
+    for (j, c) in from.tendon_map.flat_coeffs().iter().enumerate() {
         b.push(
-            format!("k{j}[{}]", i + 1),
-            &coeff_unit(free.kind, j),
+            format!("{}[{}]", form.coeff_name(j), i + 1),
+            &coeff_unit(form.kind, form.mirrored(j)),
             *c,
             f64::NEG_INFINITY,
             f64::INFINITY,
@@ -228,11 +231,11 @@ pub fn refine(
     phi_weight_mm_per_deg: f64,
 ) -> Result<JointFit, JointError> {
     for (i, l) in two_step.legs.iter().enumerate() {
-        if l.tendon_map.model != free.kind {
+        if l.tendon_map.form() != free.forms[i] {
             return Err(JointError::MixedMaps {
                 leg: i + 1,
-                found: l.tendon_map.model,
-                expected: free.kind,
+                found: l.tendon_map.form(),
+                expected: free.forms[i],
             });
         }
     }
@@ -276,7 +279,7 @@ pub fn refine(
 mod tests {
     use super::*;
     use pcr_kinematics::Pose;
-    use pcr_robot::TendonMapSpec;
+    use pcr_robot::{TendonMapKind, TendonMapSpec};
 
     /// A robot whose paper parameters are off the nominal, with an affine map.
     fn truth() -> RobotConfig {
@@ -291,10 +294,10 @@ mod tests {
             l.l_c_mm += dlc;
             l.r_p_mm += drp;
             l.theta_p_deg += dth;
-            l.tendon_map = TendonMapSpec {
-                model: TendonMapKind::Affine,
-                coeffs: vec![1e-4 * (i as f64 - 1.0), 1.05e-3 + 2e-5 * i as f64],
-            };
+            l.tendon_map = TendonMapSpec::symmetric(
+                TendonMapKind::Affine,
+                vec![1e-4 * (i as f64 - 1.0), 1.05e-3 + 2e-5 * i as f64],
+            );
         }
         t
     }
@@ -327,7 +330,7 @@ mod tests {
         JointParams {
             legs: FreeGeometry::PAPER,
             platform: Step2Params::PAPER,
-            kind: TendonMapKind::Affine,
+            forms: [MapForm::symmetric(TendonMapKind::Affine); 3],
         }
     }
 
@@ -381,7 +384,7 @@ mod tests {
             poses: &poses,
         };
         let free = JointParams {
-            kind: TendonMapKind::Poly2,
+            forms: [MapForm::symmetric(TendonMapKind::Poly2); 3],
             ..paper_affine()
         };
         let e = refine(&RobotConfig::nominal(), &truth, free, obs, 1.0).unwrap_err();

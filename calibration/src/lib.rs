@@ -5,6 +5,7 @@
 //! nothing of the simulated plant, so that it is never tested against its own assumptions.
 
 pub mod data;
+pub mod diagnosis;
 pub mod joint;
 pub mod lsq;
 pub mod params;

@@ -8,7 +8,7 @@ use crate::step2::predict_pose;
 use pcr_figures::LEG_COLOURS;
 use pcr_kinematics::{Leg, Robot};
 use pcr_recording::Split;
-use pcr_robot::RobotConfig;
+use pcr_robot::{MapReading, RobotConfig};
 use plotters::style::RGBColor;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -234,15 +234,36 @@ pub fn write_report(
     // Table I.
     let _ = writeln!(
         md,
-        "\n## Table I: the 13 tendon-map functions (RMS of M_i, mm)\n\n\
-         | # | paper's form | evaluated as | train | test | test leg 1 | test leg 2 | test leg 3 | paper's test |\n\
+        "\n## Table I: the 13 tendon-map functions in both readings (RMS of M_i, mm)\n\n\
+         Symmetric: the odd extension of the paper's form (one set of coefficients for both \
+         bending directions). Asymmetric: the paper's form for dl >= 0 and its own coefficients \
+         for dl < 0, sharing k0. Each leg takes the reading with its lower test RMS.\n\n\
+         | # | paper's form | symmetric train | symmetric test | asymmetric train | asymmetric test | readings (legs 1, 2, 3) | test | paper's test |\n\
          |---|---|---|---|---|---|---|---|---|"
     );
     for r in &cal.table1 {
-        let leg = |i: usize| opt(r.legs.get(i).and_then(|f| f.test_rms_mm), 3);
+        let of = |reading: MapReading, train: bool| {
+            opt(
+                r.reading(reading)
+                    .and_then(|f| if train { f.train_rms_mm } else { f.test_rms_mm }),
+                3,
+            )
+        };
+        let chosen = if r.chosen.len() == 3 {
+            r.chosen
+                .iter()
+                .map(|c| match c {
+                    MapReading::Symmetric => "s",
+                    MapReading::Asymmetric => "a",
+                })
+                .collect::<Vec<_>>()
+                .join(" ")
+        } else {
+            "-".into()
+        };
         let _ = writeln!(
             md,
-            "| {}{} | `{}` | `{}` | {} | {} | {} | {} | {} | {:.2} |",
+            "| {}{} | `{}` | {} | {} | {} | {} | {} | {} | {:.2} |",
             r.index,
             if r.index == cal.selected {
                 " **(selected)**"
@@ -250,28 +271,24 @@ pub fn write_report(
                 ""
             },
             r.form,
-            r.extended_form,
-            opt(r.train_rms_mm, 3),
+            of(MapReading::Symmetric, true),
+            of(MapReading::Symmetric, false),
+            of(MapReading::Asymmetric, true),
+            of(MapReading::Asymmetric, false),
+            chosen,
             opt(r.test_rms_mm, 3),
-            leg(0),
-            leg(1),
-            leg(2),
             PAPER_TABLE1_MM[r.index - 1]
         );
         if let Some(e) = &r.error {
-            let _ = writeln!(md, "| | failed: {e} | | | | | | | |");
-        } else if !r.monotonic {
-            let _ = writeln!(
-                md,
-                "| | the fitted map turns back inside the data's range or cannot be inverted up to the bending limit: not selectable | | | | | | | |"
-            );
+            let _ = writeln!(md, "| | not selectable: {e} | | | | | | | |");
         }
     }
     let _ = writeln!(
         md,
-        "\nSelected: function {} ({}), {}. The paper's column is the prototype's (for comparison of shapes, not values).\n\n![Table I](table1.svg)",
+        "\nSelected: function {} ({}; {}), {}. The paper's column is the prototype's (for comparison of shapes, not values).\n\n![Table I](table1.svg)",
         cal.selected,
         cal.table1[cal.selected - 1].name,
+        cal.table1[cal.selected - 1].chosen_text(),
         cal.selected_by
     );
     // Parameters.
@@ -303,6 +320,9 @@ pub fn write_report(
     accuracy_rows(&mut md, "before, **test**", cal.before.test.as_ref());
     accuracy_rows(&mut md, "after, **test**", cal.after.test.as_ref());
     method_rows(&mut md, cal);
+    if let Some(d) = &cal.diagnosis {
+        let _ = writeln!(md, "\n**Why:** {}.", d.line);
+    }
     let others = other_warnings(cal);
     if !others.is_empty() {
         let _ = writeln!(md, "\n## Warnings\n");
@@ -341,6 +361,12 @@ pub fn write_report(
 }
 
 fn draw_table1(dir: &Path, cal: &Calibration) -> Result<(), FigureError> {
+    let test_of = |reading: MapReading| -> Vec<Option<f64>> {
+        cal.table1
+            .iter()
+            .map(|r| r.reading(reading).and_then(|f| f.test_rms_mm))
+            .collect()
+    };
     let labels: Vec<String> = cal
         .table1
         .iter()
@@ -357,9 +383,14 @@ fn draw_table1(dir: &Path, cal: &Calibration) -> Result<(), FigureError> {
                 cal.table1.iter().map(|r| r.train_rms_mm).collect(),
             ),
             (
-                "test",
+                "test, symmetric",
                 LEG_COLOURS[0],
-                cal.table1.iter().map(|r| r.test_rms_mm).collect(),
+                test_of(MapReading::Symmetric),
+            ),
+            (
+                "test, asymmetric",
+                LEG_COLOURS[1],
+                test_of(MapReading::Asymmetric),
             ),
         ],
         "RMS of |M^ - M| (mm, log scale)",
@@ -461,7 +492,7 @@ fn draw_maps(
                 curves: vec![
                     ("start model".into(), 3, grid(&nominal)),
                     (
-                        format!("function {} ({})", cal.selected, leg_cfg.tendon_map.model),
+                        format!("function {} ({})", cal.selected, leg_cfg.tendon_map.form()),
                         i,
                         grid(&leg),
                     ),

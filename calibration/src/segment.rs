@@ -1,5 +1,6 @@
-//! One continuum segment on its own (`pcr calibrate leg`): all 13 Table I functions fitted to a
-//! segment's measured tip positions, in the segment's own frame.
+//! One continuum segment on its own (`pcr calibrate leg`): all 13 Table I functions, in both
+//! readings (symmetric and asymmetric, `pcr_robot::MapReading`), fitted to a segment's measured
+//! tip positions, in the segment's own frame.
 //!
 //! Input: a CSV (leading `#` comment lines allowed) with the tendon displacement `dl_mm` (or the
 //! motor position `q1`, converted with a robot leg's actuation), the measured point `mx_mm`,
@@ -8,8 +9,9 @@
 //! `l_ce_mm > 0`), and optionally `set` (`train` / `test`). Other columns are ignored. Without
 //! `set`, a seeded random third of the rows is held out.
 
+use crate::calibrate::Readings;
 use crate::step1::{self, FreeGeometry, LegFit, LegObservation};
-use pcr_robot::{Actuation, LegConfig, TendonMapKind};
+use pcr_robot::{Actuation, LegConfig, MapForm, MapReading, TendonMapKind};
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use serde::Serialize;
@@ -198,21 +200,30 @@ pub struct SegmentOptions {
     pub seed: u64,
     /// Fraction of rows held out by the random split.
     pub test_fraction: f64,
+    /// Which readings of the forms are fitted.
+    pub reading: Readings,
 }
 
-/// One function fitted to the segment.
+/// One function in one reading fitted to the segment.
 #[derive(Debug, Clone, Serialize)]
 pub struct SegmentFunction {
     /// Table I number.
     pub index: usize,
+    /// The reading.
+    pub reading: MapReading,
+    /// The Table I number, `a` for the asymmetric reading (`4`, `4a`).
+    pub label: String,
     /// Family name.
     pub name: &'static str,
     /// The paper's form.
     pub form: &'static str,
     /// The form as evaluated for every dl.
-    pub extended_form: &'static str,
-    /// Coefficients k0, k1, ... (1/mm, see `params` for units and uncertainties).
+    pub extended_form: String,
+    /// Coefficients k0, k1, ... (1/mm, see `params` for units and uncertainties); for dl >= 0
+    /// in the asymmetric reading.
     pub coefficients: Vec<f64>,
+    /// The asymmetric reading's coefficients for dl < 0 (without k0; empty when symmetric).
+    pub coefficients_neg: Vec<f64>,
     /// The fit (parameters with uncertainties, RMS, status); `None` when it failed.
     pub fit: Option<LegFit>,
     /// Training RMS of the measured point, mm.
@@ -240,10 +251,10 @@ pub struct SegmentResult {
     pub split: String,
     /// Range of the tendon displacement in the data, mm.
     pub dl_range_mm: [f64; 2],
-    /// All 13 functions in Table I order.
+    /// Every function in Table I order, each in the readings fitted (symmetric first).
     pub functions: Vec<SegmentFunction>,
-    /// The function with the lowest test RMS.
-    pub best: Option<usize>,
+    /// The label (`4`, `4a`) of the function and reading with the lowest test RMS.
+    pub best: Option<String>,
 }
 
 /// Fits all 13 functions to a segment's points.
@@ -316,22 +327,34 @@ pub fn fit_segment(
         l_c: opts.fit_l_c,
         ..FreeGeometry::NONE
     };
-    let functions: Vec<SegmentFunction> = TendonMapKind::ALL
-        .iter()
-        .map(|&kind| {
-            let r = step1::fit_leg("segment", None, &base, free, kind, &train, &test);
+    let forms = TendonMapKind::ALL.iter().flat_map(|&kind| {
+        opts.reading
+            .fitted()
+            .iter()
+            .map(move |&reading| MapForm { kind, reading })
+    });
+    let functions: Vec<SegmentFunction> = forms
+        .map(|form| {
+            let kind = form.kind;
+            let r = step1::fit_leg("segment", None, &base, free, form, &train, &test);
             let (fit, error) = match r {
                 Ok(f) => (Some(f), None),
                 Err(e) => (None, Some(e.to_string())),
             };
             SegmentFunction {
                 index: kind.table_index(),
+                reading: form.reading,
+                label: form.label(),
                 name: kind.name(),
                 form: kind.paper_form(),
-                extended_form: kind.extended_form(),
+                extended_form: form.evaluated_form(),
                 coefficients: fit
                     .as_ref()
                     .map(|f| f.config.tendon_map.coeffs.clone())
+                    .unwrap_or_default(),
+                coefficients_neg: fit
+                    .as_ref()
+                    .map(|f| f.config.tendon_map.coeffs_neg.clone())
                     .unwrap_or_default(),
                 train_rms_mm: fit.as_ref().map(|f| f.train_rms_mm),
                 test_rms_mm: fit.as_ref().and_then(|f| f.test_rms_mm),
@@ -343,9 +366,9 @@ pub fn fit_segment(
     let best = functions
         .iter()
         .filter(|f| f.fit.as_ref().is_some_and(|f| f.converged))
-        .filter_map(|f| Some((f.index, f.test_rms_mm.or(f.train_rms_mm)?)))
+        .filter_map(|f| Some((&f.label, f.test_rms_mm.or(f.train_rms_mm)?)))
         .min_by(|a, b| a.1.total_cmp(&b.1))
-        .map(|b| b.0);
+        .map(|b| b.0.clone());
     let (lo, hi) = points
         .iter()
         .fold((f64::INFINITY, f64::NEG_INFINITY), |a, p| {
@@ -378,6 +401,7 @@ mod tests {
             fit_l_c: false,
             seed: 3,
             test_fraction: 1.0 / 3.0,
+            reading: Readings::PerLeg,
         }
     }
 
@@ -391,10 +415,7 @@ mod tests {
             l_ce_mm: 0.0,
             ..LegConfig::nominal(0)
         };
-        cfg.tendon_map = TendonMapSpec {
-            model: TendonMapKind::Poly2,
-            coeffs: vec![2e-4, 1.2e-3, 4e-5],
-        };
+        cfg.tendon_map = TendonMapSpec::symmetric(TendonMapKind::Poly2, vec![2e-4, 1.2e-3, 4e-5]);
         let leg = Leg::from_config(&cfg);
         let mut text = String::from("# bench data\nsample,dl_mm,mx_mm,my_mm\n");
         for k in 0..45 {
@@ -406,14 +427,30 @@ mod tests {
         assert_eq!(pts.len(), 45);
         let r = fit_segment("bench.csv", &pts, &opts()).unwrap();
         assert_eq!((r.n_train, r.n_test), (30, 15));
-        let f3 = &r.functions[2];
+        // dl > 0 only: the asymmetric readings have no points for their dl < 0 coefficients.
+        assert_eq!(r.functions.len(), 26);
+        let asym = &r.functions[5];
+        assert_eq!(
+            (asym.label.as_str(), asym.reading),
+            ("3a", MapReading::Asymmetric)
+        );
+        assert!(
+            asym.error.as_ref().unwrap().contains("dl < 0"),
+            "{:?}",
+            asym.error
+        );
+        let f3 = &r.functions[4];
         assert_eq!(f3.index, 3);
         assert!(f3.test_rms_mm.unwrap() < 1e-6, "{:?}", f3.test_rms_mm);
         assert!((f3.coefficients[2] - 4e-5).abs() < 1e-9);
         // the best function fits to round-off as well (3 or a superset of it)
-        let best = &r.functions[r.best.unwrap() - 1];
+        let best = r
+            .functions
+            .iter()
+            .find(|f| Some(&f.label) == r.best.as_ref())
+            .unwrap();
         assert!(best.test_rms_mm.unwrap() < 1e-6);
-        assert!(r.functions[9].test_rms_mm.unwrap() > 0.01);
+        assert!(r.functions[18].test_rms_mm.unwrap() > 0.01);
     }
 
     #[test]

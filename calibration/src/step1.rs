@@ -13,7 +13,7 @@ use crate::lsq::{self, Fit, Options, Problem};
 use crate::DataError;
 use nalgebra::{DMatrix, DVector};
 use pcr_kinematics::{Leg, TendonMap};
-use pcr_robot::{LegConfig, TendonMapKind, TendonMapSpec};
+use pcr_robot::{LegConfig, MapForm, MapReading, TendonMapKind, TendonMapSpec};
 use serde::Serialize;
 
 /// Which geometric parameters of a leg the fit frees beside the map coefficients.
@@ -172,6 +172,8 @@ pub struct LegFit {
     pub leg: Option<usize>,
     /// The function.
     pub kind: TendonMapKind,
+    /// Its reading (one set of coefficients for both bending directions, or one per direction).
+    pub reading: MapReading,
     /// The fitted leg (geometry and map).
     #[serde(skip)]
     pub config: LegConfig,
@@ -198,6 +200,9 @@ pub struct LegFit {
     /// Whether the fitted map is strictly monotonic over the data's displacement range (10 %
     /// margin each side): a map that turns back cannot be inverted by the IK.
     pub monotonic: bool,
+    /// Why the map cannot serve the IK over the leg's travel (set by the robot calibration,
+    /// which knows the bending limit; `None`: it can).
+    pub refused: Option<String>,
 }
 
 /// Why a leg could not be fitted.
@@ -207,33 +212,27 @@ pub enum Step1Error {
     #[error(transparent)]
     Data(#[from] DataError),
     /// The solver failed.
-    #[error("{what}: function {index} ({name}): {reason}")]
+    #[error("{what}: function {label} ({name}, {reading}): {reason}")]
     Solver {
         /// Which leg or segment.
         what: String,
-        /// Table I number.
-        index: usize,
+        /// Table I number, `a` for the asymmetric reading.
+        label: String,
         /// Family name.
         name: &'static str,
+        /// The reading.
+        reading: MapReading,
         /// Why.
         reason: String,
     },
 }
 
-/// The leg with the map and geometry of a parameter vector (the free geometry, then the map
-/// coefficients of `kind`).
-pub(crate) fn leg_of(
-    base: &LegConfig,
-    free: FreeGeometry,
-    kind: TendonMapKind,
-    x: &[f64],
-) -> LegConfig {
+/// The leg with the map and geometry of a parameter vector (the free geometry, then the flat
+/// map coefficients of `form`).
+pub(crate) fn leg_of(base: &LegConfig, free: FreeGeometry, form: MapForm, x: &[f64]) -> LegConfig {
     let mut leg = base.clone();
     let k = free.apply(x, &mut leg);
-    leg.tendon_map = TendonMapSpec {
-        model: kind,
-        coeffs: x[k..].to_vec(),
-    };
+    leg.tendon_map = TendonMapSpec::from_flat(form, &x[k..]);
     leg
 }
 
@@ -280,26 +279,34 @@ pub fn theta_of_m(leg: &Leg, m: [f64; 2]) -> f64 {
     }
 }
 
-/// Linear least-squares coefficients of `kind` for curvature estimates (dl, kappa).
-pub fn linear_coefficients(kind: TendonMapKind, pts: &[(f64, f64)]) -> Option<Vec<f64>> {
-    let off = usize::from(!kind.has_offset());
-    let nc = kind.n_coeffs();
+/// Linear least-squares coefficients of `form` (flat order) for curvature estimates
+/// (dl, kappa).
+pub fn linear_coefficients(form: MapForm, pts: &[(f64, f64)]) -> Option<Vec<f64>> {
+    let nc = form.n_coeffs();
     if pts.len() < nc {
         return None;
     }
     let mut a = DMatrix::zeros(pts.len(), nc);
     let mut b = DVector::zeros(pts.len());
-    let mut basis = [0.0; 7];
+    let mut basis = [0.0; 13];
     for (r, (dl, kappa)) in pts.iter().enumerate() {
-        TendonMap::basis(kind, *dl, &mut basis);
+        TendonMap::flat_basis(form, *dl, &mut basis);
         for c in 0..nc {
-            a[(r, c)] = basis[c + off];
+            a[(r, c)] = basis[c];
         }
         b[r] = *kappa;
     }
-    // Column scaling keeps the SVD well conditioned (dl^3 vs 1).
+    // Column scaling keeps the SVD well conditioned (dl^3 vs 1); a column without data (no
+    // point on one side of an asymmetric map) keeps a unit scale and a zero coefficient.
     let scale: Vec<f64> = (0..nc)
-        .map(|c| a.column(c).norm().max(f64::MIN_POSITIVE))
+        .map(|c| {
+            let n = a.column(c).norm();
+            if n > 0.0 {
+                n
+            } else {
+                1.0
+            }
+        })
         .collect();
     for (c, s) in scale.iter().enumerate() {
         a.column_mut(c).unscale_mut(*s);
@@ -312,7 +319,7 @@ pub fn linear_coefficients(kind: TendonMapKind, pts: &[(f64, f64)]) -> Option<Ve
 struct LegProblem<'a> {
     base: &'a LegConfig,
     free: FreeGeometry,
-    kind: TendonMapKind,
+    form: MapForm,
     obs: &'a [LegObservation],
 }
 
@@ -322,7 +329,7 @@ impl Problem for LegProblem<'_> {
     }
 
     fn residuals(&mut self, x: &[f64], r: &mut [f64]) -> Result<(), String> {
-        let leg = Leg::from_config(&leg_of(self.base, self.free, self.kind, x));
+        let leg = Leg::from_config(&leg_of(self.base, self.free, self.form, x));
         m_residuals(&leg, self.obs, r);
         Ok(())
     }
@@ -352,24 +359,26 @@ pub fn m_errors(leg: &LegConfig, obs: &[LegObservation]) -> (f64, f64) {
     ((ss / obs.len().max(1) as f64).sqrt(), mx)
 }
 
-/// Fits one function to one leg: `base` gives the starting geometry (and everything not
-/// freed), `train` the observations fitted, `test` those reported. `what` names the leg in
-/// errors.
+/// Fits one function in one reading to one leg: `base` gives the starting geometry (and
+/// everything not freed), `train` the observations fitted, `test` those reported. `what` names
+/// the leg in errors.
 pub fn fit_leg(
     what: &str,
     leg_index: Option<usize>,
     base: &LegConfig,
     free: FreeGeometry,
-    kind: TendonMapKind,
+    form: MapForm,
     train: &[LegObservation],
     test: &[LegObservation],
 ) -> Result<LegFit, Step1Error> {
+    let kind = form.kind;
     let geo = free.params(base);
-    let n = geo.len() + kind.n_coeffs();
+    let n = geo.len() + form.n_coeffs();
     let solver_err = |reason: String| Step1Error::Solver {
         what: what.to_string(),
-        index: kind.table_index(),
+        label: form.label(),
         name: kind.name(),
+        reading: form.reading,
         reason,
     };
     if 2 * train.len() <= n {
@@ -379,6 +388,21 @@ pub fn fit_leg(
             n / 2 + 1
         )));
     }
+    if form.reading == MapReading::Asymmetric {
+        // Each direction's coefficients need points of their own.
+        let need = kind.n_direction_coeffs() + 1;
+        for (side, count) in [
+            ("dl < 0", train.iter().filter(|o| o.dl_mm < 0.0).count()),
+            ("dl > 0", train.iter().filter(|o| o.dl_mm > 0.0).count()),
+        ] {
+            if count < need {
+                return Err(solver_err(format!(
+                    "{count} training points with {side} for the {} coefficient(s) of that direction: at least {need} needed",
+                    kind.n_direction_coeffs()
+                )));
+            }
+        }
+    }
     // Start: nominal geometry, coefficients from the curvatures that reproduce the measured
     // points best on the nominal leg.
     let nominal_leg = Leg::from_config(base);
@@ -386,7 +410,7 @@ pub fn fit_leg(
         .iter()
         .map(|o| (o.dl_mm, theta_of_m(&nominal_leg, o.m) / base.l_c_mm))
         .collect();
-    let coeffs = linear_coefficients(kind, &pts)
+    let coeffs = linear_coefficients(form, &pts)
         .ok_or_else(|| solver_err("no starting coefficients (degenerate data)".into()))?;
     let mut x0: Vec<f64> = geo.iter().map(|g| g.2).collect();
     let mut lo: Vec<f64> = geo.iter().map(|g| g.3).collect();
@@ -397,19 +421,21 @@ pub fn fit_leg(
     let mut prob = LegProblem {
         base,
         free,
-        kind,
+        form,
         obs: train,
     };
     let fit = lsq::solve(&mut prob, &x0, &lo, &hi, &Options::default())
         .map_err(|e| solver_err(e.to_string()))?;
-    let config = leg_of(base, free, kind, &fit.x);
+    let config = leg_of(base, free, form, &fit.x);
     if !fit.x.iter().all(|v| v.is_finite()) {
         return Err(solver_err("the optimum is not finite".into()));
     }
     let names: Vec<(String, String)> = geo
         .iter()
         .map(|g| (g.0.to_string(), g.1.to_string()))
-        .chain((0..kind.n_coeffs()).map(|j| (format!("k{j}"), coeff_unit(kind, j))))
+        .chain(
+            (0..form.n_coeffs()).map(|j| (form.coeff_name(j), coeff_unit(kind, form.mirrored(j)))),
+        )
         .collect();
     let (params, correlated) = describe(&fit, &names, &x0);
     let (train_rms, _) = m_errors(&config, train);
@@ -428,8 +454,10 @@ pub fn fit_leg(
     let monotonic = is_monotonic(&TendonMap::from_spec(&config.tendon_map), lo, hi);
     Ok(LegFit {
         monotonic,
+        refused: None,
         leg: leg_index,
         kind,
+        reading: form.reading,
         config,
         params,
         train_rms_mm: train_rms,
@@ -442,6 +470,44 @@ pub fn fit_leg(
         evaluations: fit.evaluations,
         correlated,
     })
+}
+
+/// Whether a map can serve the IK over a leg's travel: strictly monotonic over the data's
+/// displacements `[lo, hi]` (mm) widened by 10 % of the span each side, and invertible on its
+/// monotonic branch around dl = 0 over the curvatures `travel` (1/mm, the range the robot's
+/// workspace asks of the leg: `pcr_kinematics::workspace::leg_travel`) widened by 10 % of
+/// their span each side. The error says which range fails, in mm of tendon and degrees of
+/// bending (`l_c_mm` converts).
+pub fn map_coverage(
+    map: &TendonMap,
+    l_c_mm: f64,
+    travel: [f64; 2],
+    lo: f64,
+    hi: f64,
+) -> Result<(), String> {
+    let [b_lo, b_hi] = map.invertible_range();
+    let m = 0.1 * (hi - lo).max(1e-3);
+    let (need_lo, need_hi) = (lo - m, hi + m);
+    if b_lo > need_lo || b_hi < need_hi || !is_monotonic(map, lo, hi) {
+        let turn = if b_lo > need_lo { b_lo } else { b_hi };
+        return Err(format!(
+            "the map turns back at dl = {turn:.2} mm: it is monotonic on [{b_lo:.2}, {b_hi:.2}] mm, but the leg's travel in the data needs [{need_lo:.2}, {need_hi:.2}] mm (the data's range widened by 10 %)"
+        ));
+    }
+    let mk = 0.1 * (travel[1] - travel[0]).abs();
+    let (k_lo, k_hi) = (travel[0] - mk, travel[1] + mk);
+    if map.dl_for_kappa(k_lo).is_err() || map.dl_for_kappa(k_hi).is_err() {
+        let (a, b) = (map.kappa(b_lo), map.kappa(b_hi));
+        let deg = |k: f64| (k * l_c_mm).to_degrees();
+        return Err(format!(
+            "the map cannot be inverted over the leg's travel: the workspace needs bending from {:.1} to {:.1} deg (widened by 10 %), the map reaches {:.1} to {:.1} deg on its monotonic branch dl in [{b_lo:.2}, {b_hi:.2}] mm",
+            deg(k_lo),
+            deg(k_hi),
+            deg(a.min(b)),
+            deg(a.max(b)),
+        ));
+    }
+    Ok(())
 }
 
 /// Whether the map can be inverted for every bending up to the robot's limit (+-bending_max
@@ -575,10 +641,7 @@ mod tests {
         let mut truth = nominal.clone();
         truth.psi_deg += 0.4;
         truth.l_c_mm -= 0.6;
-        truth.tendon_map = TendonMapSpec {
-            model: TendonMapKind::Affine,
-            coeffs: vec![1.5e-4, 1.08e-3],
-        };
+        truth.tendon_map = TendonMapSpec::symmetric(TendonMapKind::Affine, vec![1.5e-4, 1.08e-3]);
         let obs = synthetic(&truth, 0.0);
         let (train, test) = obs.split_at(40);
         let fit = fit_leg(
@@ -586,7 +649,7 @@ mod tests {
             Some(1),
             &nominal,
             FreeGeometry::PAPER,
-            TendonMapKind::Affine,
+            MapForm::symmetric(TendonMapKind::Affine),
             train,
             test,
         )
@@ -604,10 +667,8 @@ mod tests {
     fn every_function_fits_and_the_true_family_wins() {
         let nominal = LegConfig::nominal(0);
         let mut truth = nominal.clone();
-        truth.tendon_map = TendonMapSpec {
-            model: TendonMapKind::Root2,
-            coeffs: vec![0.0, 9.0e-4, 2.5e-4],
-        };
+        truth.tendon_map =
+            TendonMapSpec::symmetric(TendonMapKind::Root2, vec![0.0, 9.0e-4, 2.5e-4]);
         let obs = synthetic(&truth, 0.05);
         let (train, test): (Vec<_>, Vec<_>) = obs
             .iter()
@@ -622,7 +683,7 @@ mod tests {
                 Some(0),
                 &nominal,
                 FreeGeometry::PAPER,
-                kind,
+                MapForm::symmetric(kind),
                 &train,
                 &test,
             )
@@ -656,7 +717,7 @@ mod tests {
             Some(2),
             &nominal,
             FreeGeometry::EXTENDED,
-            TendonMapKind::Root6,
+            MapForm::symmetric(TendonMapKind::Root6),
             &obs[..3],
             &[],
         )

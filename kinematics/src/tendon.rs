@@ -5,8 +5,12 @@
 //! `sgn(dl) * b(|dl|)`, so that a map fitted to positive displacements bends the segment the
 //! other way by the same amount for negative ones; the constant k0 stays an offset. The
 //! polynomial terms therefore read `dl`, `dl|dl|`, `dl^3`.
+//!
+//! Asymmetric reading ([`MapReading::Asymmetric`]): the same odd-extended terms with one set of
+//! coefficients for dl >= 0 and another for dl < 0, sharing k0 (a leg whose two tendons bend it
+//! differently). For dl >= 0 this is the paper's form as written.
 
-use pcr_robot::{Actuation, LegConfig, TendonMapKind, TendonMapSpec};
+use pcr_robot::{Actuation, LegConfig, MapForm, MapReading, TendonMapKind, TendonMapSpec};
 
 /// Why a curvature could not be mapped back to a tendon displacement.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -33,8 +37,11 @@ pub const DL_SEARCH_MM: f64 = 60.0;
 #[derive(Debug, Clone, PartialEq)]
 pub struct TendonMap {
     kind: TendonMapKind,
-    /// Coefficients with k0 first (k0 = 0 for families without an offset).
+    reading: MapReading,
+    /// Coefficients with k0 first (k0 = 0 for families without an offset), for dl >= 0.
     k: [f64; 7],
+    /// Coefficients for dl < 0 (the same as `k` in the symmetric reading; `k_neg[0] = k[0]`).
+    k_neg: [f64; 7],
     n: usize,
     /// The interval around dl = 0 (within +-[`DL_SEARCH_MM`]) on which the map is strictly
     /// monotonic: the branch the inverse searches, so that a map that turns back far from
@@ -65,9 +72,32 @@ impl TendonMap {
         TendonMap::from_spec(spec)
     }
 
-    /// Builds a map from a validated specification.
+    /// Builds a map from a validated specification (either reading).
     pub fn from_spec(spec: &TendonMapSpec) -> TendonMap {
-        TendonMap::new(spec.model, &spec.coeffs)
+        match spec.reading {
+            MapReading::Symmetric => TendonMap::new(spec.model, &spec.coeffs),
+            MapReading::Asymmetric => {
+                TendonMap::asymmetric(spec.model, &spec.coeffs, &spec.coeffs_neg)
+            }
+        }
+    }
+
+    /// Builds an asymmetric map: `coeffs` as in [`TendonMap::new`] for dl >= 0, `coeffs_neg`
+    /// (the non-constant coefficients, without k0) for dl < 0. Missing coefficients are zero.
+    pub fn asymmetric(kind: TendonMapKind, coeffs: &[f64], coeffs_neg: &[f64]) -> TendonMap {
+        let mut m = TendonMap::new(kind, coeffs);
+        m.reading = MapReading::Asymmetric;
+        m.k_neg = [0.0; 7];
+        m.k_neg[0] = m.k[0];
+        for (j, c) in coeffs_neg
+            .iter()
+            .take(kind.n_direction_coeffs())
+            .enumerate()
+        {
+            m.k_neg[j + 1] = *c;
+        }
+        m.branch = m.monotone_branch();
+        m
     }
 
     /// Builds a map from its family and coefficients as written in the configuration
@@ -80,7 +110,9 @@ impl TendonMap {
         }
         let mut m = TendonMap {
             kind,
+            reading: MapReading::Symmetric,
             k,
+            k_neg: k,
             n: kind.n_coeffs() + off,
             branch: [-DL_SEARCH_MM, DL_SEARCH_MM],
         };
@@ -150,10 +182,63 @@ impl TendonMap {
         self.kind
     }
 
-    /// Coefficients k0, k1, ... as in the configuration file (k0 omitted for families without it).
+    /// The reading.
+    pub fn reading(&self) -> MapReading {
+        self.reading
+    }
+
+    /// The family and reading.
+    pub fn form(&self) -> MapForm {
+        MapForm {
+            kind: self.kind,
+            reading: self.reading,
+        }
+    }
+
+    /// Coefficients k0, k1, ... as in the configuration file (k0 omitted for families without
+    /// it); those of dl >= 0 in the asymmetric reading.
     pub fn coeffs(&self) -> Vec<f64> {
         let off = usize::from(!self.kind.has_offset());
         self.k[off..self.n].to_vec()
+    }
+
+    /// The specification of this map (what a robot file holds).
+    pub fn spec(&self) -> TendonMapSpec {
+        let mut spec = TendonMapSpec::symmetric(self.kind, self.coeffs());
+        if self.reading == MapReading::Asymmetric {
+            spec.reading = MapReading::Asymmetric;
+            spec.coeffs_neg = self.k_neg[1..self.n].to_vec();
+        }
+        spec
+    }
+
+    /// The columns of the flat coefficient vector of `form` at `dl` (mm): the map is linear in
+    /// its coefficients, `kappa = sum_j out[j] x[j]` with `x` =
+    /// [`TendonMapSpec::flat_coeffs`]. Returns the number of columns ([`MapForm::n_coeffs`]).
+    /// Used by the regressions.
+    pub fn flat_basis(form: MapForm, dl: f64, out: &mut [f64; 13]) -> usize {
+        let mut b = [0.0; 7];
+        let n = TendonMap::basis(form.kind, dl, &mut b);
+        let off = usize::from(!form.kind.has_offset());
+        let direct = &b[off..n];
+        match form.reading {
+            MapReading::Symmetric => {
+                out[..direct.len()].copy_from_slice(direct);
+                direct.len()
+            }
+            MapReading::Asymmetric => {
+                // [k0], then the dl >= 0 terms, then the dl < 0 terms.
+                let shared = usize::from(form.kind.has_offset());
+                let terms = &b[1..n];
+                out[..shared].copy_from_slice(&b[..shared]);
+                let (pos, neg) = if dl >= 0.0 { (1.0, 0.0) } else { (0.0, 1.0) };
+                for (j, t) in terms.iter().enumerate() {
+                    out[shared + j] = pos * t;
+                    out[shared + terms.len() + j] = neg * t;
+                }
+                shared + 2 * terms.len()
+            }
+        }
     }
 
     /// Basis functions of the family at `dl` (mm), including the constant 1 first; returns the
@@ -203,7 +288,7 @@ impl TendonMap {
     /// The root families have an infinite slope at dl = 0; there the slope at |dl| = 1e-9 mm
     /// is returned.
     pub fn kappa_and_slope(&self, dl: f64) -> (f64, f64) {
-        let k = &self.k;
+        let k = if dl < 0.0 { &self.k_neg } else { &self.k };
         let a = dl.abs();
         match self.kind {
             TendonMapKind::Linear | TendonMapKind::Affine => (k[0] + k[1] * dl, k[1]),
@@ -246,7 +331,9 @@ impl TendonMap {
     /// |dl| <= [`DL_SEARCH_MM`]); a curvature beyond that branch is out of range. (Every calibrated map of a real
     /// segment is).
     pub fn dl_for_kappa(&self, kappa: f64) -> Result<f64, TendonMapError> {
-        if self.kind == TendonMapKind::Linear || self.kind == TendonMapKind::Affine {
+        if (self.kind == TendonMapKind::Linear || self.kind == TendonMapKind::Affine)
+            && self.reading == MapReading::Symmetric
+        {
             if self.k[1] == 0.0 {
                 return Err(TendonMapError::NotMonotonic(self.kind));
             }
@@ -451,6 +538,76 @@ mod tests {
             m.dl_for_kappa(m.kappa(hi) + 1e-4),
             Err(TendonMapError::OutOfRange { .. })
         ));
+    }
+
+    /// An asymmetric map of `kind`: the sample map for dl >= 0, other coefficients for dl < 0.
+    fn asymmetric_sample(kind: TendonMapKind) -> TendonMap {
+        let m = sample_map(kind);
+        let off = usize::from(kind.has_offset());
+        let neg: Vec<f64> = m.coeffs()[off..]
+            .iter()
+            .enumerate()
+            .map(|(j, c)| c * (0.7 + 0.1 * j as f64))
+            .collect();
+        TendonMap::asymmetric(kind, &m.coeffs(), &neg)
+    }
+
+    #[test]
+    fn the_asymmetric_reading_is_the_paper_form_for_positive_dl_and_its_own_for_negative() {
+        for kind in TendonMapKind::ALL {
+            let sym = sample_map(kind);
+            let asym = asymmetric_sample(kind);
+            let same = TendonMap::asymmetric(kind, &sym.coeffs(), &sym.k[1..sym.n]);
+            for i in -40..=40 {
+                let dl = i as f64 * 0.37 + 0.013;
+                // Equal coefficient lists give the symmetric map.
+                assert_eq!(same.kappa_and_slope(dl), sym.kappa_and_slope(dl), "{kind}");
+                let (k, s) = asym.kappa_and_slope(dl);
+                if dl >= 0.0 {
+                    assert_eq!((k, s), sym.kappa_and_slope(dl), "{kind}");
+                } else if i < -1 {
+                    assert!((k - sym.kappa(dl)).abs() > 1e-9, "{kind} at {dl}");
+                }
+                let h = 1e-6;
+                let fd = (asym.kappa(dl + h) - asym.kappa(dl - h)) / (2.0 * h);
+                assert!((fd - s).abs() < 1e-7 * s.abs().max(1e-3), "{kind}");
+                let back = asym.dl_for_kappa(k).unwrap();
+                assert!((back - dl).abs() < 1e-9, "{kind}: {back} vs {dl}");
+            }
+            // Continuous at 0 (the shared k0).
+            assert!(
+                (asym.kappa(1e-60) - asym.kappa(-1e-60)).abs() < 1e-9,
+                "{kind}"
+            );
+            assert_eq!(TendonMap::from_spec(&asym.spec()), asym);
+            assert_eq!(asym.spec().form(), MapForm::asymmetric(kind));
+        }
+        // The cubic taken literally on both signs (k2 dl^2 keeps an even part) is an
+        // asymmetric poly3: k_neg = (k1, -k2, k3).
+        let (k0, k1, k2, k3) = (2e-5, 1.1e-3, -2e-6, 3e-8);
+        let literal =
+            TendonMap::asymmetric(TendonMapKind::Poly3, &[k0, k1, k2, k3], &[k1, -k2, k3]);
+        for dl in [-2.5, -0.4, 0.0, 0.3, 7.0] {
+            let want = k0 + k1 * dl + k2 * dl * dl + k3 * dl * dl * dl;
+            assert!((literal.kappa(dl) - want).abs() < 1e-15, "{dl}");
+        }
+    }
+
+    #[test]
+    fn flat_basis_reproduces_evaluation_in_both_readings() {
+        for kind in TendonMapKind::ALL {
+            for m in [sample_map(kind), asymmetric_sample(kind)] {
+                let x = m.spec().flat_coeffs();
+                assert_eq!(x.len(), m.form().n_coeffs());
+                let mut b = [0.0; 13];
+                for dl in [-3.1, -0.2, 0.0, 0.5, 7.7] {
+                    let n = TendonMap::flat_basis(m.form(), dl, &mut b);
+                    assert_eq!(n, x.len());
+                    let v: f64 = (0..n).map(|j| b[j] * x[j]).sum();
+                    assert!((v - m.kappa(dl)).abs() < 1e-15, "{kind}");
+                }
+            }
+        }
     }
 
     #[test]

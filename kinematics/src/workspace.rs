@@ -161,6 +161,41 @@ pub fn feasible(robot: &Robot, pose: &Pose) -> bool {
     }
 }
 
+/// The curvature each leg needs over the robot's workspace (its travel): at each orientation of
+/// `phis` (rad), the feasible poses (IK valid in the working mode, not singular) on a grid of
+/// `step_mm` covering a square of 1.2 times the base radius about the origin; per leg the
+/// smallest and largest curvature (1/mm) of those poses. `None` when no pose is feasible.
+///
+/// A tendon map must be invertible over this range, or the robot has poses it can reach with
+/// no motor position for them.
+pub fn leg_travel(robot: &Robot, phis: &[f64], step_mm: f64) -> Option<[[f64; 2]; 3]> {
+    let r = 0.6 * robot.legs.iter().map(|l| g::norm(l.b)).sum::<f64>() / 3.0;
+    let grid = Grid::covering(-r, r, -r, r, step_mm.max(0.1));
+    let mut out = [[f64::INFINITY, f64::NEG_INFINITY]; 3];
+    let mut any = false;
+    for &phi in phis {
+        for j in 0..grid.ny {
+            for i in 0..grid.nx {
+                let c = grid.center(i, j);
+                let pose = Pose::new(c[0], c[1], phi);
+                let Ok(s) = robot.ik(&pose) else {
+                    continue;
+                };
+                if robot.conditioning(&pose, &s.kappa).value() < robot.limits.singularity_threshold
+                {
+                    continue;
+                }
+                any = true;
+                for (o, k) in out.iter_mut().zip(s.kappa) {
+                    o[0] = o[0].min(k);
+                    o[1] = o[1].max(k);
+                }
+            }
+        }
+    }
+    any.then_some(out)
+}
+
 /// Largest distance of the platform centre from the origin that any leg could reach, mm.
 fn reach(robot: &Robot) -> f64 {
     robot
@@ -441,6 +476,29 @@ pub fn position_error_for_steps(robot: &Robot, pose: &Pose, steps: [f64; 3]) -> 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn leg_travel_covers_the_workspace_poses() {
+        let r = Robot::nominal();
+        let phis = [-10f64.to_radians(), 0.0, 10f64.to_radians()];
+        let t = leg_travel(&r, &phis, 4.0).unwrap();
+        // The nominal legs bend from about -34 to +94 degrees over the workspace at these
+        // orientations (an IK scan at 3 mm).
+        for k in t {
+            let (lo, hi) = ((k[0] * 125.0).to_degrees(), (k[1] * 125.0).to_degrees());
+            assert!(
+                lo < -25.0 && lo > -40.0 && hi > 80.0 && hi < 100.0,
+                "{lo} {hi}"
+            );
+        }
+        // Every check pose of geometry.md lies within it.
+        for (x, y, phi) in [(0.0, 0.0, 0.0), (20.0, -10.0, 5.0), (-40.0, 30.0, -10.0)] {
+            let s = r.ik(&Pose::from_mm_deg(x, y, phi)).unwrap();
+            for (k, range) in s.kappa.iter().zip(t) {
+                assert!(*k >= range[0] && *k <= range[1]);
+            }
+        }
+    }
 
     #[test]
     fn grid_and_alpha_agree_on_the_nominal_robot() {

@@ -6,13 +6,13 @@
 //! - `pcr calibrate leg --data leg.csv --l-c-mm L [--l-ce-mm E] --json out.json`
 
 use anyhow::{bail, Context};
-use pcr_calibration::calibrate::{self, Calibration, Method, Options, ParameterSet};
+use pcr_calibration::calibrate::{self, Calibration, Method, Options, ParameterSet, Readings};
 use pcr_calibration::report::{opt, write_report};
 use pcr_calibration::segment::{self, SegmentOptions};
 use pcr_calibration::StaticData;
 use pcr_offline::clock::utc_now;
 use pcr_recording::Recording;
-use pcr_robot::{RobotConfig, TendonMapKind};
+use pcr_robot::{MapReading, RobotConfig, TendonMapKind};
 use std::path::{Path, PathBuf};
 
 /// Arguments of `pcr calibrate`.
@@ -27,8 +27,32 @@ pub struct Args {
 
 #[derive(clap::Subcommand)]
 enum CalibrateCommand {
-    /// Fit all 13 Table I functions to one continuum segment's measured tip positions.
+    /// Fit all 13 Table I functions, in both readings, to one continuum segment's measured tip
+    /// positions.
     Leg(LegArgs),
+}
+
+/// Which readings of the Table I forms are fitted.
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum ReadingArg {
+    /// Both; each leg takes the one with its lower held-out error of M_i.
+    PerLeg,
+    /// The odd extension only: one set of coefficients for both bending directions (the
+    /// paper's forms, as before the asymmetric reading existed).
+    Symmetric,
+    /// Coefficients per bending direction only (the paper's form for dl >= 0, its own
+    /// coefficients for dl < 0).
+    Asymmetric,
+}
+
+impl From<ReadingArg> for Readings {
+    fn from(r: ReadingArg) -> Readings {
+        match r {
+            ReadingArg::PerLeg => Readings::PerLeg,
+            ReadingArg::Symmetric => Readings::Symmetric,
+            ReadingArg::Asymmetric => Readings::Asymmetric,
+        }
+    }
 }
 
 /// Which parameters the two steps free.
@@ -77,6 +101,10 @@ struct RobotArgs {
     /// Use this Table I function (1..13) instead of selecting by test RMS.
     #[arg(long, value_parser = clap::value_parser!(u8).range(1..=13))]
     function: Option<u8>,
+    /// Readings of the tendon-map forms: both, each leg taking the better on held-out poses
+    /// (default), or only one.
+    #[arg(long, value_enum, default_value = "per-leg")]
+    reading: ReadingArg,
     /// Weight of one degree of orientation error in step 2, mm (default: r_p pi / 180).
     #[arg(long, value_name = "MM_PER_DEG")]
     phi_weight: Option<f64>,
@@ -112,6 +140,9 @@ struct LegArgs {
     /// Seed of the random 2/3 : 1/3 split by row (files without a `set` column).
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Readings of the forms fitted: both (default) or one.
+    #[arg(long, value_enum, default_value = "per-leg")]
+    reading: ReadingArg,
     /// Result as JSON.
     #[arg(long, value_name = "OUT.json")]
     json: Option<PathBuf>,
@@ -160,6 +191,7 @@ fn run_robot(a: RobotArgs) -> anyhow::Result<()> {
         function: a
             .function
             .and_then(|f| TendonMapKind::from_table_index(f as usize)),
+        reading: a.reading.into(),
         phi_weight_mm_per_deg: a.phi_weight,
         seed: a.seed,
         ..Options::default()
@@ -192,23 +224,47 @@ fn print_summary(cal: &Calibration, report: Option<&Path>) {
         "{}: {} static poses ({} train, {} test)",
         cal.data.file, cal.data.poses, cal.data.train, cal.data.test
     );
-    println!(" #  function      train RMS  test RMS of M_i (mm)");
+    println!(
+        " #  function      RMS of M_i (mm): symmetric train / test, asymmetric train / test, readings (legs 1 2 3)"
+    );
     for r in &cal.table1 {
+        let of = |reading: MapReading| {
+            r.reading(reading).map_or(" ".repeat(19), |f| {
+                format!("{:>9} {:>9}", opt(f.train_rms_mm, 3), opt(f.test_rms_mm, 3))
+            })
+        };
+        let chosen: String = r
+            .chosen
+            .iter()
+            .map(|c| match c {
+                MapReading::Symmetric => " s",
+                MapReading::Asymmetric => " a",
+            })
+            .collect();
         println!(
-            "{:2}{} {:12} {:>9} {:>9}{}",
+            "{:2}{} {:12} {}  {}  {}{}",
             r.index,
             if r.index == cal.selected { '*' } else { ' ' },
             r.name,
-            opt(r.train_rms_mm, 3),
-            opt(r.test_rms_mm, 3),
-            match (&r.error, r.monotonic) {
-                (Some(e), _) => format!("  failed: {e}"),
-                (None, false) => "  (the map turns back inside the data or cannot reach the bending limit: not selectable)".into(),
-                _ => String::new(),
+            of(MapReading::Symmetric),
+            of(MapReading::Asymmetric),
+            if r.error.is_none() {
+                chosen
+            } else {
+                " -".into()
+            },
+            match &r.error {
+                Some(e) => format!("  not selectable: {e}"),
+                None => String::new(),
             }
         );
     }
-    println!("selected: function {} ({})", cal.selected, cal.selected_by);
+    println!(
+        "selected: function {} ({}; {})",
+        cal.selected,
+        cal.selected_by,
+        cal.table1[cal.selected - 1].chosen_text()
+    );
     let line = |label: &str,
                 b: Option<&calibrate::ModelAccuracy>,
                 a: Option<&calibrate::ModelAccuracy>| {
@@ -245,6 +301,9 @@ fn print_summary(cal: &Calibration, report: Option<&Path>) {
     );
     line("train", Some(&cal.before.train), Some(&cal.after.train));
     line("test ", cal.before.test.as_ref(), cal.after.test.as_ref());
+    if let Some(d) = &cal.diagnosis {
+        println!("why: {}", d.line);
+    }
     for w in pcr_calibration::report::other_warnings(cal) {
         eprintln!("warning: {w}");
     }
@@ -275,29 +334,40 @@ fn run_leg(a: LegArgs) -> anyhow::Result<()> {
         fit_l_c: a.fit_l_c,
         seed: a.seed,
         test_fraction: 1.0 / 3.0,
+        reading: a.reading.into(),
     };
     let r = segment::fit_segment(&a.data.display().to_string(), &points, &opts)?;
     println!(
         "{}: {} rows ({} train, {} test; split {}), dl from {:.3} to {:.3} mm",
         r.file, r.points, r.n_train, r.n_test, r.split, r.dl_range_mm[0], r.dl_range_mm[1]
     );
-    println!(" #  function      train RMS  test RMS (mm)  form");
+    println!(" #   function      train RMS  test RMS (mm)  form");
     for f in &r.functions {
         println!(
-            "{:2}{} {:12} {:>9} {:>9}     {}{}",
-            f.index,
-            if Some(f.index) == r.best { '*' } else { ' ' },
+            "{:3}{} {:12} {:>9} {:>9}     {}{}",
+            f.label,
+            if Some(&f.label) == r.best.as_ref() {
+                '*'
+            } else {
+                ' '
+            },
             f.name,
             opt(f.train_rms_mm, 4),
             opt(f.test_rms_mm, 4),
-            f.form,
+            f.extended_form,
             f.error
                 .as_deref()
                 .map_or(String::new(), |e| format!("  failed: {e}"))
         );
     }
-    match r.best {
-        Some(b) => println!("best: function {b} ({})", r.functions[b - 1].name),
+    match &r.best {
+        Some(b) => {
+            let f = r.functions.iter().find(|f| f.label == *b);
+            println!(
+                "best: function {b} ({})",
+                f.map_or(String::new(), |f| format!("{}, {}", f.name, f.reading))
+            )
+        }
         None => bail!("{}: no function could be fitted", r.file),
     }
     if let Some(j) = &a.json {

@@ -72,10 +72,10 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         bail!("--alpha {}: must be in (0, 1)", a.alpha);
     }
     for c in &a.candidates {
-        if !pcr_residuals::candidates::NAMES.contains(&c.as_str()) {
+        if pcr_residuals::effects::named(c).is_none() {
             bail!(
                 "--candidates: unknown effect `{c}` (known: {})",
-                pcr_residuals::candidates::NAMES.join(", ")
+                pcr_residuals::effects::names().join(", ")
             );
         }
     }

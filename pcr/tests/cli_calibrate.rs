@@ -27,10 +27,10 @@ fn deviated() -> RobotConfig {
         l.l_c_mm += [0.4, -0.3, 0.2][i];
         l.r_p_mm += [-0.2, 0.1, 0.3][i];
         l.theta_p_deg += [0.3, -0.2, -0.1][i];
-        l.tendon_map = TendonMapSpec {
-            model: TendonMapKind::Affine,
-            coeffs: vec![1e-5 * (i as f64 + 1.0), 1.0 / 900.0],
-        };
+        l.tendon_map = TendonMapSpec::symmetric(
+            TendonMapKind::Affine,
+            vec![1e-5 * (i as f64 + 1.0), 1.0 / 900.0],
+        );
     }
     r
 }
@@ -296,6 +296,46 @@ fn calibrate_refuses_bad_recordings_with_clear_errors() {
 }
 
 #[test]
+fn calibrate_leg_finds_a_segment_that_bends_differently_each_way() {
+    let d = tempfile::tempdir().unwrap();
+    // A 125 mm segment whose quadratic term is even (k2 dl^2 taken literally on both signs):
+    // it bends less one way than the other.
+    let mut text = String::from("dl_mm,mx_mm,my_mm\n");
+    for k in 0..60 {
+        let dl: f64 = -3.0 + 0.19 * k as f64;
+        let kappa = 2e-5 + 1.1e-3 * dl + 4e-5 * dl * dl;
+        let th = kappa * 125.0;
+        let (mx, my) = ((1.0 - th.cos()) / kappa, th.sin() / kappa);
+        text += &format!("{dl},{mx},{my}\n");
+    }
+    let p = write(d.path(), "leg.csv", &text);
+    let json = d.path().join("leg.json");
+    let o = pcr(&[
+        "calibrate",
+        "leg",
+        "--data",
+        p.to_str().unwrap(),
+        "--l-c-mm",
+        "125",
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let f = v["functions"].as_array().unwrap();
+    let (sym, asym) = (&f[4], &f[5]);
+    assert_eq!((&sym["label"], &asym["label"]), (&"3".into(), &"3a".into()));
+    // The asymmetric reading of function 3 holds the truth: k_neg = (k1, -k2).
+    assert!(asym["test_rms_mm"].as_f64().unwrap() < 1e-6, "{asym}");
+    assert!((asym["coefficients_neg"][1].as_f64().unwrap() + 4e-5).abs() < 1e-9);
+    assert!(sym["test_rms_mm"].as_f64().unwrap() > 0.1, "{sym}");
+    assert!(v["best"].as_str().unwrap().ends_with('a'), "{}", v["best"]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("asymmetric"), "{out}");
+}
+
+#[test]
 fn calibrate_leg_fits_a_segment_file() {
     let d = tempfile::tempdir().unwrap();
     // A 110 mm segment with a 20 mm extension, curvature 1e-4 + 1.1e-3 dl + 2e-4 sqrt(dl).
@@ -328,11 +368,20 @@ fn calibrate_leg_fits_a_segment_file() {
     let v: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     let f = v["functions"].as_array().unwrap();
-    assert_eq!(f.len(), 13);
-    assert_eq!(f[4]["index"], 5);
-    assert!(f[4]["test_rms_mm"].as_f64().unwrap() < 1e-6, "{}", f[4]);
-    assert!((f[4]["coefficients"][2].as_f64().unwrap() - 2e-4).abs() < 1e-9);
-    assert!(v["best"].as_u64().is_some());
+    // Every function in both readings; dl > 0 only, so the asymmetric ones are refused.
+    assert_eq!(f.len(), 26);
+    assert_eq!(
+        (&f[8]["index"], &f[8]["reading"]),
+        (&5.into(), &"symmetric".into())
+    );
+    assert!(f[8]["test_rms_mm"].as_f64().unwrap() < 1e-6, "{}", f[8]);
+    assert!((f[8]["coefficients"][2].as_f64().unwrap() - 2e-4).abs() < 1e-9);
+    assert!(
+        f[9]["error"].as_str().unwrap().contains("dl < 0"),
+        "{}",
+        f[9]
+    );
+    assert!(v["best"].as_str().is_some());
     assert_eq!(v["n_test"], 13);
     // q1 without --robot, and a missing column, are refused by name.
     let p = write(d.path(), "q.csv", "q1,mx_mm,my_mm\n1,2,3\n");

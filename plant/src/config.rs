@@ -105,8 +105,14 @@ pub enum TrueMapKind {
 pub struct TrueTendonMap {
     /// `linear` or `tanh`.
     pub model: TrueMapKind,
-    /// Slope at dl0 relative to the nominal 1/a (tendon offset a of the robot configuration).
+    /// Slope at dl0 relative to the nominal 1/a (tendon offset a of the robot configuration);
+    /// for dl >= dl0 when `gain_neg` is given.
     pub gain: [f64; 3],
+    /// Slope for dl < dl0 relative to the nominal 1/a: the other tendon of the pair, for a leg
+    /// that bends differently each way (pretension, friction and routing differ between the two
+    /// tendons). Default: `gain` (a leg that bends alike both ways).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gain_neg: Option<[f64; 3]>,
     /// Displacement offset dl0 (pretension asymmetry), mm.
     pub dl0_mm: [f64; 3],
     /// Saturation bending phi_sat of the `tanh` model, degrees (unused by `linear`).
@@ -289,6 +295,7 @@ impl PlantConfig {
             tendon_map: TrueTendonMap {
                 model: TrueMapKind::Linear,
                 gain: [1.0; 3],
+                gain_neg: None,
                 dl0_mm: [0.0; 3],
                 phi_sat_deg: [360.0; 3],
                 cross_coupling: 0.0,
@@ -355,6 +362,7 @@ impl PlantConfig {
         c.tendon_map = TrueTendonMap {
             model: TrueMapKind::Tanh,
             gain: [0.96, 0.93, 0.98],
+            gain_neg: None,
             dl0_mm: [0.05, -0.08, 0.03],
             phi_sat_deg: [260.0, 240.0, 280.0],
             cross_coupling: 0.0,
@@ -531,6 +539,9 @@ impl PlantConfig {
         check3("geometry.d_theta_p_deg", &g.d_theta_p_deg, -10.0, 10.0)?;
         let t = &self.tendon_map;
         check3("tendon_map.gain", &t.gain, 0.1, 10.0)?;
+        if let Some(g) = &t.gain_neg {
+            check3("tendon_map.gain_neg", g, 0.1, 10.0)?;
+        }
         check3("tendon_map.dl0_mm", &t.dl0_mm, -10.0, 10.0)?;
         check3("tendon_map.phi_sat_deg", &t.phi_sat_deg, 30.0, 3600.0)?;
         let s = &self.stepper;

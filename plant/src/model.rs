@@ -60,8 +60,10 @@ pub struct TendonMap {
     pub kind: TrueMapKind,
     /// Nominal tendon offset a, mm.
     pub a: f64,
-    /// Relative slope.
+    /// Relative slope (for dl >= dl0).
     pub gain: f64,
+    /// Relative slope for dl < dl0 (the other tendon of the pair).
+    pub gain_neg: f64,
     /// Offset, mm.
     pub dl0: f64,
     /// Saturation, rad.
@@ -71,7 +73,12 @@ pub struct TendonMap {
 impl TendonMap {
     /// phi_b = g(dl), rad.
     pub fn bending(&self, dl: f64) -> f64 {
-        let lin = self.gain * (dl - self.dl0) / self.a;
+        let gain = if dl < self.dl0 {
+            self.gain_neg
+        } else {
+            self.gain
+        };
+        let lin = gain * (dl - self.dl0) / self.a;
         match self.kind {
             TrueMapKind::Linear => lin,
             TrueMapKind::Tanh => self.phi_sat * (lin / self.phi_sat).tanh(),
@@ -123,6 +130,7 @@ impl TrueRobot {
             kind: t.model,
             a: robot.legs[i].actuation.tendon_offset_mm,
             gain: t.gain[i],
+            gain_neg: t.gain_neg.map_or(t.gain[i], |g| g[i]),
             dl0: t.dl0_mm[i],
             phi_sat: t.phi_sat_deg[i].to_radians(),
         });

@@ -444,6 +444,20 @@ fn geometry_and_tendon_map_signatures() {
         assert!((m.bending(m.dl0 + 5.0) + m.bending(m.dl0 - 5.0)).abs() < 1e-12);
         assert!((slope(m.dl0) * m.a - m.gain).abs() < 1e-9);
     }
+    // A leg that bends differently each way: the slope below dl0 is the other tendon's.
+    let mut cfg = PlantConfig::prototype();
+    cfg.tendon_map.gain_neg = Some([0.80, 1.05, 0.90]);
+    let asym = TruthModel::new(&robot, &cfg).unwrap();
+    for i in 0..3 {
+        let (m, p) = (asym.robot.maps[i], proto.robot.maps[i]);
+        let slope = |dl: f64| (m.bending(dl + 1e-4) - m.bending(dl - 1e-4)) / 2e-4;
+        assert!((slope(m.dl0 - 0.5) * m.a / m.gain_neg - 1.0).abs() < 1e-3);
+        assert!((slope(m.dl0 + 0.5) * m.a / m.gain - 1.0).abs() < 1e-3);
+        assert_eq!(m.bending(m.dl0 + 3.0), p.bending(p.dl0 + 3.0));
+        let ratio = m.bending(m.dl0 - 3.0) / -m.bending(m.dl0 + 3.0);
+        assert!((ratio - m.gain_neg / m.gain).abs() < 0.01, "{ratio}");
+        assert!(m.bending(m.dl0).abs() < 1e-15);
+    }
 }
 
 /// det A of geometry.md at the home pose of the nominal robot: +3.82e9.

@@ -2,8 +2,9 @@
 //! until the full (non-linearised) model lowers the training error, re-linearised and refitted
 //! (Gauss-Newton) while that helps, and then every effect's parameters are refined together.
 
-use crate::candidates::{self, Fitted};
 use crate::context::Context;
+use crate::effects;
+use crate::fitted::Fitted;
 use crate::model::ExtendedModel;
 use crate::series::{Blocks, Series};
 use pcr_robot::RobotConfig;
@@ -24,7 +25,7 @@ pub(crate) fn accept<'a>(
     w_phi: f64,
     progress: &crate::progress::ProgressSink,
 ) -> Option<(RobotConfig, Context<'a>)> {
-    let name = first.name;
+    let effect = effects::named(first.name);
     // The steps compare training errors: their contexts hold the training rows alone.
     let n_train = ctx.train().len();
     let start_sse = ctx.sse(&ctx.train(), None);
@@ -43,7 +44,7 @@ pub(crate) fn accept<'a>(
         let mut improved = false;
         let mut frac = trust;
         while frac >= 1.0 / 16.0 {
-            let cand = crate::model::blend(&base_cfg, &full, frac);
+            let cand = blend(&base_cfg, &full, frac);
             let nctx = cand
                 .validate("extended robot")
                 .ok()
@@ -62,7 +63,7 @@ pub(crate) fn accept<'a>(
         }
         trust = (2.0 * frac).min(1.0);
         progress.step();
-        if !improved || !candidates::iterable(name) || it + 1 == GN_STEPS {
+        if !improved || !effect.is_none_or(|e| e.iterable()) || it + 1 == GN_STEPS {
             break;
         }
         let (_, c, s) = cur.as_ref()?;
@@ -70,7 +71,7 @@ pub(crate) fn accept<'a>(
         if *s > 0.999 * base_sse {
             break;
         }
-        step = candidates::fit(name, c, &c.train());
+        step = effect.and_then(|e| e.fit(c, &c.train()));
     }
     let (cfg, nctx, sse) = cur?;
     // Every effect's parameters together on the full model.
@@ -86,4 +87,17 @@ pub(crate) fn accept<'a>(
     // The held-out rows too, for the scoring that follows.
     let model = ExtendedModel::like(&cfg, &ctx.model).ok()?;
     Some((cfg, Context::new(series, model, blocks, w_phi)))
+}
+
+/// The configuration a fraction `s` of the way from `old` to `new`: every effect's part of the
+/// robot file interpolated ([`crate::effects::Effect::blend`]: the legs' geometry, map
+/// coefficients of the same family, the effects' continuous parameters; an effect absent from
+/// `old` counts as zero), structural differences (another map family, other periodic terms)
+/// taken from `new`. Damps a linearised step.
+pub(crate) fn blend(old: &RobotConfig, new: &RobotConfig, s: f64) -> RobotConfig {
+    let mut out = new.clone();
+    for effect in effects::ALL {
+        effect.blend(old, &mut out, s);
+    }
+    out
 }

@@ -17,9 +17,9 @@
 //!   the data show, and the analysis goes on with that delay, so that no effect is named for it.
 
 use crate::context::Context;
+use crate::effects::latency;
 use crate::linear::motor_delta;
 use crate::series::Series;
-use pcr_robot::effects::Latency;
 use serde::Serialize;
 
 /// What the data say about a recording's declared delay.
@@ -155,7 +155,7 @@ fn align_series(ctx: &Context, si: usize) -> Timing {
     blocks.dedup();
     out.moving_rows = rows.len();
     out.blocks = blocks.len();
-    let delay_now = s.delay_s + latency_of(ctx);
+    let delay_now = s.delay_s + latency::held_s(&ctx.model.config.effects);
     if rows.len() < MIN_ROWS || blocks.len() < MIN_BLOCKS {
         out.message = format!(
             "{}: {} moving rows in {} blocks: too few to estimate the command delay; the declared {} s is used.",
@@ -299,16 +299,6 @@ fn whole_cycles_within(estimate: f64, tolerance: f64, period: f64) -> f64 {
     (k * period * 1e9).round() / 1e9
 }
 
-/// The latency the model already holds, s.
-fn latency_of(ctx: &Context) -> f64 {
-    ctx.model
-        .config
-        .effects
-        .latency
-        .as_ref()
-        .map_or(0.0, |l| l.latency_s)
-}
-
 /// Training rows of series `si` whose prediction depends on the delay (the command moved
 /// within a few cycles before them); all its rows when the whole series is held out. Evenly
 /// thinned to [`PROFILE_ROWS`].
@@ -344,14 +334,13 @@ fn per_block_sse(
     rows: &[usize],
     extra: f64,
     blocks: &[usize],
-    nuisance: Option<&crate::context::NuisanceTable>,
+    nuisance: Option<&crate::nuisance::NuisanceTable>,
 ) -> Vec<f64> {
     let s = &ctx.series[si];
     let e = &ctx.model.config.effects;
-    let lat = Latency {
-        latency_s: latency_of(ctx) + extra,
-    };
-    let q = crate::model::effective_steps(s, Some(&lat), &e.periodic, e.backlash.as_ref());
+    let q = ctx
+        .model
+        .effective_steps(s, &latency::with(e, latency::held_s(e) + extra));
     let dir = motion_direction(&q);
     // Residual after the delay's change, and the columns fitted with it, per row.
     let mut res = Vec::with_capacity(rows.len());

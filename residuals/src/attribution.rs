@@ -8,10 +8,12 @@
 //! the features it correlates with are named.
 
 use crate::acceptance::{accept, GN_STEPS};
-use crate::candidates::{self, Estimate, Fitted};
 use crate::context::{Context, Errors};
+use crate::effects::{self, Role};
 use crate::features::{self, FeatureLink, Features};
+use crate::fitted::{Estimate, Fitted};
 use crate::model::ExtendedModel;
+use crate::options::Options;
 use crate::plausibility::unphysical;
 use crate::scoring::{Reference, Round};
 use crate::series::{Blocks, Series};
@@ -20,42 +22,6 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 pub use crate::scoring::{Score, MIN_SHARE};
-
-/// Settings of the attribution.
-#[derive(Debug, Clone, Serialize)]
-pub struct Options {
-    /// Family-wise significance level of one round (divided among the candidates).
-    pub alpha: f64,
-    /// Smallest RMS reduction of the held-out position error worth claiming, mm.
-    pub min_effect_mm: f64,
-    /// Largest number of effects added.
-    pub max_rounds: usize,
-    /// Candidates tried (names of [`candidates::NAMES`]).
-    pub candidates: Vec<String>,
-    /// Largest distance of the extended model's geometry from the drawing, mm or degrees.
-    pub max_geometry_change: f64,
-    /// Solve every row on its own: no reuse of a row at rest's prediction, no warm-started
-    /// loaded equilibrium, load responses computed at every row instead of interpolated between
-    /// anchors. Slow; the reference the fast path is tested against.
-    pub exact: bool,
-    /// Where progress is reported (nowhere by default).
-    #[serde(skip)]
-    pub progress: crate::progress::ProgressSink,
-}
-
-impl Default for Options {
-    fn default() -> Self {
-        Options {
-            alpha: 1e-2,
-            min_effect_mm: 0.01,
-            max_rounds: 6,
-            candidates: candidates::NAMES.iter().map(|s| s.to_string()).collect(),
-            max_geometry_change: 3.0,
-            exact: false,
-            progress: Default::default(),
-        }
-    }
-}
 
 /// Plot data of one feature: its name, the residual component, (feature value, residual).
 pub type FeaturePoints = (String, String, Vec<(f64, f64)>);
@@ -161,64 +127,22 @@ fn mark(scores: &mut [Score], round: usize, name: &str, note: String) {
     }
 }
 
-/// An effect's parameters as the configuration holds them now, with the uncertainties of the
-/// fit that found it (matched by name).
+/// An effect's parameters as the configuration holds them now
+/// ([`crate::effects::Effect::declared`]), with the uncertainties of the fit that found it
+/// (matched by name); the fitted ones where the effect reads none back.
 fn current_params(c: &RobotConfig, name: &str, fitted: &[Estimate]) -> Vec<Estimate> {
-    let e = &c.effects;
     let std = |n: &str| fitted.iter().find(|p| p.name == n).and_then(|p| p.std);
-    let p = |n: &str, v: f64, unit: &str| Estimate {
-        name: n.into(),
-        value: v,
-        std: std(n),
-        unit: unit.into(),
-    };
-    match name {
-        "latency" => e
-            .latency
-            .as_ref()
-            .map(|l| vec![p("latency", l.latency_s, "s")]),
-        "backlash" => e.backlash.as_ref().map(|b| {
-            (0..3)
-                .map(|i| p(&format!("play motor {}", i + 1), b.steps[i], "steps"))
+    effects::named(name)
+        .and_then(|e| e.declared(&c.effects))
+        .map(|ps| {
+            ps.into_iter()
+                .map(|p| Estimate {
+                    std: std(&p.name),
+                    ..p
+                })
                 .collect()
-        }),
-        "creep" => e.creep.as_ref().map(|cr| {
-            let mut v: Vec<Estimate> = (0..3)
-                .map(|i| p(&format!("gain leg {}", i + 1), cr.gain[i], "mm/mm"))
-                .collect();
-            v.push(p("time constant", cr.time_constant_s, "s"));
-            v
-        }),
-        "drift" => e.drift.as_ref().map(|d| {
-            (0..3)
-                .map(|i| p(&format!("rate leg {}", i + 1), d.rate_mm_per_s[i], "mm/s"))
-                .collect()
-        }),
-        "joint_springs" => e.compliance.as_ref().map(|k| {
-            vec![
-                p("k_M", k.k_m_n_mm_per_rad, "N mm/rad"),
-                p("k_P", k.k_p_n_mm_per_rad, "N mm/rad"),
-                p("EI (assumed)", k.ei_n_mm2, "N mm^2"),
-            ]
-        }),
-        "external_load" => e.compliance.as_ref().map(|k| {
-            vec![
-                p("force x", k.force_n[0], "N"),
-                p("force y", k.force_n[1], "N"),
-                p("couple", k.couple_n_mm, "N mm"),
-                p("EI (assumed)", k.ei_n_mm2, "N mm^2"),
-            ]
-        }),
-        "frame" => e.frame.as_ref().map(|f| {
-            vec![
-                p("dx", f.dx_mm, "mm"),
-                p("dy", f.dy_mm, "mm"),
-                p("dphi", f.dphi_deg, "deg"),
-            ]
-        }),
-        _ => None,
-    }
-    .unwrap_or_else(|| fitted.to_vec())
+        })
+        .unwrap_or_else(|| fitted.to_vec())
 }
 
 /// (predicted change, residual along it) on held-out rows, at most 3000 points.
@@ -246,7 +170,12 @@ pub fn residual_table(
     out: &mut dyn std::io::Write,
 ) -> Result<(), AttributionError> {
     let w_phi = robot.legs.iter().map(|l| l.r_p_mm).sum::<f64>() / 3.0;
-    let ctx = Context::new(series, ExtendedModel::new(robot)?, blocks, w_phi);
+    let ctx = Context::new(
+        series,
+        ExtendedModel::new(robot, effects::chain())?,
+        blocks,
+        w_phi,
+    );
     let feats = Features::of(&ctx);
     features::write_csv(&ctx, &feats, out).map_err(|e| AttributionError::Data(e.to_string()))
 }
@@ -267,7 +196,7 @@ pub fn attribute(
     opts: &Options,
 ) -> Result<Attribution, AttributionError> {
     let w_phi = start.legs.iter().map(|l| l.r_p_mm).sum::<f64>() / 3.0;
-    let mut model = ExtendedModel::new(start)?;
+    let mut model = ExtendedModel::new(start, effects::chain())?;
     model.exact = opts.exact;
     let rows: usize = series.iter().map(|s| s.samples.len()).sum();
     opts.progress
@@ -421,8 +350,9 @@ struct Confirmed<'a> {
 
 impl<'a> Search<'a> {
     /// One round's candidates fitted on the training rows (in parallel; each fit is
-    /// deterministic) and scored on the held-out rows, best total gain first. `geometry` is
-    /// scored first: the parsimony rule of the effects needs its verdict.
+    /// deterministic) and scored on the held-out rows, best total gain first. The reference
+    /// (the recalibration, [`Role::Reference`]) is fitted first: the scoring of the effects and
+    /// its parsimony rule need it.
     fn fit_and_score(&mut self, round: usize, set: &Setting) -> Vec<(Fitted, Score)> {
         let ctx = &self.ctx;
         let (train, test) = (ctx.train(), ctx.test());
@@ -430,32 +360,35 @@ impl<'a> Search<'a> {
             .opts
             .candidates
             .iter()
-            .filter(|n| *n == "periodic" || !self.added.iter().any(|a| &a.name == *n))
+            .filter(|n| {
+                effects::named(n).is_some_and(|e| e.repeatable())
+                    || !self.added.iter().any(|a| &a.name == *n)
+            })
             .collect();
-        // The reference for the effects: the recalibration (geometry) fit; for geometry itself,
+        // The reference for the effects: the recalibration fit; for the recalibration itself,
         // the model as it is.
-        let mut geo = candidates::geometry(ctx, &train);
+        let mut recal = effects::reference().and_then(|g| g.fit(ctx, &train));
         // A recalibration that would leave the drawing only mimics another cause: it is then no
         // reference (the effects are measured against the model as it is).
-        let geo_physical = geo.as_ref().is_some_and(|g| {
+        let recal_physical = recal.as_ref().is_some_and(|g| {
             let mut probe = self.config.clone();
             (g.change)(&mut probe);
             unphysical(&probe, &self.config, set.drawing, set.opts).is_none()
         });
-        let geo_delta = geo
+        let recal_delta = recal
             .as_ref()
-            .filter(|_| geo_physical)
+            .filter(|_| recal_physical)
             .map(|g| (g.delta.clone(), g.train_sse, g.k));
         let mut effect_reference = Reference {
-            delta: geo_delta.as_ref().map(|g| g.0.as_slice()),
-            train_sse: geo_delta
+            delta: recal_delta.as_ref().map(|g| g.0.as_slice()),
+            train_sse: recal_delta
                 .as_ref()
                 .map_or_else(|| ctx.sse(&train, None), |g| g.1),
-            k: geo_delta.as_ref().map_or(0, |g| g.2),
-            geometry_gain_ms: geo_delta.as_ref().map(|g| {
+            k: recal_delta.as_ref().map_or(0, |g| g.2),
+            recalibration_gain_ms: recal_delta.as_ref().map(|g| {
                 (ctx.sse(&test, None) - ctx.sse(&test, Some(&g.0))) / test.len().max(1) as f64
             }),
-            geometry_significant: false,
+            recalibration_significant: false,
         };
         set.opts
             .progress
@@ -463,9 +396,9 @@ impl<'a> Search<'a> {
         let fitted_all: Vec<Option<Fitted>> = names
             .par_iter()
             .map(|name| {
-                let f = (name.as_str() != "geometry")
-                    .then(|| candidates::fit(name, ctx, &train))
-                    .flatten();
+                let f = effects::named(name)
+                    .filter(|e| e.role() != Role::Reference)
+                    .and_then(|e| e.fit(ctx, &train));
                 set.opts.progress.step();
                 f
             })
@@ -482,17 +415,17 @@ impl<'a> Search<'a> {
         };
         let mut fits: Vec<(Fitted, Score)> = Vec::new();
         for (name, pre) in names.iter().zip(fitted_all) {
-            let fitted = if name.as_str() == "geometry" {
-                geo.take()
+            let fitted = if is_reference(name) {
+                recal.take()
             } else {
                 pre
             };
             let Some(f) = fitted.filter(within_linearisation) else {
                 continue;
             };
-            let s = if f.name == "geometry" {
+            let s = if is_reference(f.name) {
                 let s = scoring.score(&f, &Reference::model_as_is(ctx, &train));
-                effect_reference.geometry_significant = s.significant;
+                effect_reference.recalibration_significant = s.significant;
                 s
             } else {
                 scoring.score(&f, &effect_reference)
@@ -573,7 +506,9 @@ impl<'a> Search<'a> {
         }
         let added = Added {
             name: name.to_string(),
-            description: candidates::describe(name).to_string(),
+            description: effects::named(name)
+                .map_or("unknown", |e| e.description())
+                .to_string(),
             params: s.params.clone(),
             uncertainty: s.params.iter().map(|p| (p.name.clone(), p.std)).collect(),
             evidence: s.clone(),
@@ -588,6 +523,11 @@ impl<'a> Search<'a> {
     }
 }
 
+/// Whether `name` is the reference of the scoring ([`Role::Reference`]).
+fn is_reference(name: &str) -> bool {
+    effects::named(name).is_some_and(|e| e.role() == Role::Reference)
+}
+
 /// A linearised change of more than 20 mm (or 20 weighted mm of orientation) on a row is
 /// outside the linearisation: such a fit is not scored.
 fn within_linearisation(f: &Fitted) -> bool {
@@ -598,12 +538,12 @@ fn within_linearisation(f: &Fitted) -> bool {
 
 impl Verdict {
     /// The verdict from the effects added and whether a structure remains. A refit of the
-    /// calibration parameters (geometry, tendon map) absorbs, it does not explain: the verdict
-    /// counts physical effects.
+    /// calibration parameters ([`Role::Recalibration`], [`Role::Reference`]) absorbs, it does
+    /// not explain: the verdict counts physical effects.
     fn of(added: &[Added], remains: bool) -> Verdict {
         let physical = added
             .iter()
-            .any(|a| !matches!(a.name.as_str(), "geometry" | "tendon_map"));
+            .any(|a| effects::named(&a.name).is_none_or(|e| e.role() == Role::Physical));
         match (physical, remains) {
             (_, false) => Verdict::Explained,
             (true, true) => Verdict::PartlyExplained,

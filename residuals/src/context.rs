@@ -2,6 +2,7 @@
 //! need to fit against them (the model's Jacobians at each row) and the held-out blocks.
 
 use crate::model::{ExtendedModel, Prediction};
+use crate::nuisance::{Nuisance, NuisanceTable};
 use crate::series::{Blocks, Series};
 use rayon::prelude::*;
 
@@ -71,15 +72,6 @@ pub struct ResponseCheck {
     /// Largest error of an interpolated response on the check sample, relative to the largest
     /// response of that parameter.
     pub max_relative_error: f64,
-}
-
-/// The nuisance parameters and their columns for every row of a context.
-#[derive(Debug)]
-pub struct NuisanceTable {
-    /// The parameters.
-    pub nui: crate::linear::Nuisance,
-    /// Columns per row.
-    pub cols: Vec<crate::linear::Columns>,
 }
 
 impl<'a> Context<'a> {
@@ -152,8 +144,20 @@ impl<'a> Context<'a> {
     pub fn nuisance(&self) -> std::sync::Arc<NuisanceTable> {
         self.nuisance
             .get_or_init(|| {
-                let nui = crate::linear::Nuisance::of(self);
-                let cols = nui.table(self);
+                let nui = Nuisance::of(&self.model.config);
+                let cols = (0..self.rows.len())
+                    .into_par_iter()
+                    .map(|i| {
+                        let mut c = vec![[0.0; 3]; nui.n];
+                        nui.columns(
+                            &self.model.robot,
+                            self.pred(&self.rows[i]),
+                            self.w_phi,
+                            &mut c,
+                        );
+                        c
+                    })
+                    .collect();
                 std::sync::Arc::new(NuisanceTable { nui, cols })
             })
             .clone()

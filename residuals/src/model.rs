@@ -1,26 +1,28 @@
 //! The extended model: the calibrated constant-curvature robot plus the effects its file
 //! declares, predicting the measured pose of every row of a recording.
 //!
-//! The chain of a prediction, in the order the physics runs:
-//! 1. the timing contract and the latency: the motors are where the command was the recording's
-//!    command delay (`Series::delay_s`: what the file declares, `shared/spec/recording.md`
-//!    "Timing"; a chain whose drive executes a setpoint over the following cycle declares one
-//!    period) plus `latency_s` earlier;
-//! 2. periodic transmission errors: the output lags the motor by `A sin(2 pi q / P + phase)`;
-//! 3. backlash: the output follows the motor through a play of `b` steps;
-//! 4. creep: the tendon lengthens by `e`, `de/dt = (gain dl - e) / T`, so the segment sees
-//!    `dl - e`;
-//!    drift: the tendon lengthens by `rate * (t - t0)` (t0 the recording's first row);
-//! 5. the tendon map gives the curvatures and the (loaded, with `[effects.compliance]`) forward
-//!    kinematics the pose;
-//! 6. frame correction: the measurement is corrected by the declared rigid transform before it
-//!    is compared.
+//! The chain of a prediction, in the order the physics runs (each effect's part of a stage is
+//! its [`crate::extension::Extension`], in its own module under [`crate::effects`]):
+//! 1. timing: the motors are where the command was the recording's command delay
+//!    (`Series::delay_s`: what the file declares, `shared/spec/recording.md` "Timing"; a chain
+//!    whose drive executes a setpoint over the following cycle declares one period) plus the
+//!    effects' delay (`latency`) earlier;
+//! 2. transmission: the output of a motor as a function of its position (`periodic`: the output
+//!    lags the motor by `A sin(2 pi q / P + phase)`);
+//! 3. play: the output follows the motor through a play (`backlash`: `b` steps);
+//! 4. tendons: the tendon lengthens, so the segment sees less displacement (`creep`:
+//!    `de/dt = (gain dl - e) / T`, then `drift`: `rate * (t - t0)`, t0 the recording's first
+//!    row);
+//! 5. the tendon map gives the curvatures and the forward kinematics the pose, loaded when an
+//!    effect loads the robot (`joint_springs`, `external_load`: `[effects.compliance]`);
+//! 6. measurement: the measurement is corrected before it is compared (`frame`).
 
+use crate::extension::Chain;
 use crate::series::Series;
 use nalgebra::Matrix3;
 use pcr_kinematics::statics::Loads;
 use pcr_kinematics::{Pose, Robot};
-use pcr_robot::effects::{Backlash, Creep, Drift, Effects, Latency, Periodic};
+use pcr_robot::effects::Effects;
 use pcr_robot::RobotConfig;
 use rayon::prelude::*;
 
@@ -56,6 +58,8 @@ pub struct ExtendedModel {
     /// Every row solved on its own (no reuse of the previous row's configuration or
     /// equilibrium): the reference the fast path is tested against.
     pub exact: bool,
+    /// The effects' parts of the prediction ([`crate::effects::chain`]).
+    pub chain: Chain,
 }
 
 /// Why a model cannot be built.
@@ -64,24 +68,22 @@ pub struct ExtendedModel {
 pub struct ModelError(pub String);
 
 impl ExtendedModel {
-    /// The model of a robot file.
-    pub fn new(config: &RobotConfig) -> Result<ExtendedModel, ModelError> {
+    /// The model of a robot file whose effects predict through `chain` (the registered
+    /// effects: [`crate::effects::chain`]).
+    pub fn new(config: &RobotConfig, chain: Chain) -> Result<ExtendedModel, ModelError> {
         let robot = Robot::new(config).map_err(|e| ModelError(e.to_string()))?;
         Ok(ExtendedModel {
-            loads: config
-                .effects
-                .compliance
-                .as_ref()
-                .map(Loads::from_compliance),
+            loads: chain.iter().find_map(|x| x.loads(&config.effects)),
             robot,
             config: config.clone(),
             exact: false,
+            chain,
         })
     }
 
-    /// The model of a robot file, solved as `like` is (exact or fast).
+    /// The model of a robot file, solved as `like` is (exact or fast, the same chain).
     pub fn like(config: &RobotConfig, like: &ExtendedModel) -> Result<ExtendedModel, ModelError> {
-        let mut m = ExtendedModel::new(config)?;
+        let mut m = ExtendedModel::new(config, like.chain)?;
         m.exact = like.exact;
         Ok(m)
     }
@@ -108,18 +110,14 @@ impl ExtendedModel {
         want: &(dyn Fn(usize) -> bool + Sync),
     ) -> Vec<Prediction> {
         let e = &self.config.effects;
-        let q_eff = effective_steps(s, e.latency.as_ref(), &e.periodic, e.backlash.as_ref());
+        let q_eff = self.effective_steps(s, e);
         let mmps: [f64; 3] = std::array::from_fn(|i| self.config.legs[i].actuation.mm_per_step());
-        let dl: Vec<[f64; 3]> = q_eff
+        let mut dl_eff: Vec<[f64; 3]> = q_eff
             .iter()
             .map(|q| std::array::from_fn(|i| q[i] * mmps[i]))
             .collect();
-        let mut dl_eff = match &e.creep {
-            Some(c) => apply_creep(s, &dl, c),
-            None => dl,
-        };
-        if let Some(d) = &e.drift {
-            apply_drift(s, &mut dl_eff, d);
+        for x in self.chain {
+            x.tendons(e, s, &mut dl_eff);
         }
         let n = s.samples.len();
         let chunk = if self.exact { n.max(1) } else { PREDICT_CHUNK };
@@ -229,12 +227,34 @@ impl ExtendedModel {
         out
     }
 
-    /// The measured pose of a row with the frame correction applied.
+    /// The measured pose of a row (x mm, y mm, phi rad) with the effects' corrections of the
+    /// measurement applied (stage 6).
     pub fn corrected(&self, m: [f64; 3]) -> [f64; 3] {
-        match &self.config.effects.frame {
-            Some(f) => f.apply(m),
-            None => m,
+        self.chain
+            .iter()
+            .fold(m, |m, x| x.corrected(&self.config.effects, m))
+    }
+
+    /// The motor outputs of every row of a series (steps) before the play, when the model's
+    /// effects are `effects`: the commands delayed (stage 1) and through the transmission
+    /// (stage 2).
+    pub fn steps_before_play(&self, s: &Series, effects: &Effects) -> Vec<[f64; 3]> {
+        let delay: f64 = self.chain.iter().map(|x| x.delay_s(effects)).sum();
+        let mut q = delayed_steps(s, s.delay_s + delay);
+        for x in self.chain {
+            x.transmission(effects, &mut q);
         }
+        q
+    }
+
+    /// The motor outputs of every row of a series (steps) when the model's effects are
+    /// `effects`: stages 1 to 3 (timing, transmission, play).
+    pub fn effective_steps(&self, s: &Series, effects: &Effects) -> Vec<[f64; 3]> {
+        let mut q = self.steps_before_play(s, effects);
+        for x in self.chain {
+            x.play(effects, &mut q);
+        }
+        q
     }
 }
 
@@ -265,183 +285,9 @@ pub fn delayed_steps(s: &Series, delay: f64) -> Vec<[f64; 3]> {
     out
 }
 
-/// Motor outputs after latency and periodic transmission errors (before backlash).
-pub fn steps_before_backlash(
-    s: &Series,
-    latency: Option<&Latency>,
-    periodic: &[Periodic],
-) -> Vec<[f64; 3]> {
-    let mut q = delayed_steps(s, s.delay_s + latency.map_or(0.0, |l| l.latency_s));
-    for p in periodic {
-        let i = (p.motor as usize).clamp(1, 3) - 1;
-        let ph = p.phase_deg.to_radians();
-        for v in &mut q {
-            v[i] -= p.amplitude_steps * (std::f64::consts::TAU * v[i] / p.period_steps + ph).sin();
-        }
-    }
-    q
-}
-
-/// Backlash on motor outputs, in place.
-pub fn apply_backlash(q: &mut [[f64; 3]], b: &Backlash) {
-    for i in 0..3 {
-        if b.steps[i] == 0.0 {
-            continue;
-        }
-        let h = 0.5 * b.steps[i];
-        let mut out = q.first().map_or(0.0, |v| v[i]);
-        for v in q.iter_mut() {
-            out = out.clamp(v[i] - h, v[i] + h);
-            v[i] = out;
-        }
-    }
-}
-
-/// Motor outputs after latency, periodic transmission errors and backlash.
-pub fn effective_steps(
-    s: &Series,
-    latency: Option<&Latency>,
-    periodic: &[Periodic],
-    backlash: Option<&Backlash>,
-) -> Vec<[f64; 3]> {
-    let mut q = steps_before_backlash(s, latency, periodic);
-    if let Some(b) = backlash {
-        apply_backlash(&mut q, b);
-    }
-    q
-}
-
-/// Tendon creep: the elongation state over the series and the effective displacement.
-pub fn apply_creep(s: &Series, dl: &[[f64; 3]], c: &Creep) -> Vec<[f64; 3]> {
-    let mut e = [0.0f64; 3];
-    let mut prev_t = s.samples.first().map_or(0.0, |x| x.t_s);
-    dl.iter()
-        .zip(&s.samples)
-        .map(|(d, x)| {
-            let dt = (x.t_s - prev_t).max(0.0);
-            prev_t = x.t_s;
-            let a = 1.0 - (-dt / c.time_constant_s).exp();
-            std::array::from_fn(|i| {
-                e[i] += (c.gain[i] * d[i] - e[i]) * a;
-                d[i] - e[i]
-            })
-        })
-        .collect()
-}
-
-/// Tendon drift: the effective displacement shortened by `rate * (t - t0)`, in place.
-pub fn apply_drift(s: &Series, dl: &mut [[f64; 3]], d: &Drift) {
-    let t0 = s.samples.first().map_or(0.0, |x| x.t_s);
-    for (v, x) in dl.iter_mut().zip(&s.samples) {
-        for i in 0..3 {
-            v[i] -= d.rate_mm_per_s[i] * (x.t_s - t0);
-        }
-    }
-}
-
-/// The configuration a fraction `s` of the way from `old` to `new`: every continuous parameter
-/// (leg geometry, map coefficients of the same family, effect parameters; an effect absent from
-/// `old` counts as zero) interpolated; structural differences (another map family, other
-/// periodic terms) taken from `new`. Used to damp a linearised step.
-pub fn blend(old: &RobotConfig, new: &RobotConfig, s: f64) -> RobotConfig {
-    let lerp = |a: f64, b: f64| a + s * (b - a);
-    let mut out = new.clone();
-    for (o, (a, b)) in out.legs.iter_mut().zip(old.legs.iter().zip(&new.legs)) {
-        o.r_base_mm = lerp(a.r_base_mm, b.r_base_mm);
-        o.beta_deg = lerp(a.beta_deg, b.beta_deg);
-        o.psi_deg = lerp(a.psi_deg, b.psi_deg);
-        o.l_c_mm = lerp(a.l_c_mm, b.l_c_mm);
-        o.l_ce_mm = lerp(a.l_ce_mm, b.l_ce_mm);
-        o.l_st_mm = lerp(a.l_st_mm, b.l_st_mm);
-        o.r_p_mm = lerp(a.r_p_mm, b.r_p_mm);
-        o.theta_p_deg = lerp(a.theta_p_deg, b.theta_p_deg);
-        if a.tendon_map.model == b.tendon_map.model
-            && a.tendon_map.coeffs.len() == b.tendon_map.coeffs.len()
-        {
-            for (c, (x, y)) in o
-                .tendon_map
-                .coeffs
-                .iter_mut()
-                .zip(a.tendon_map.coeffs.iter().zip(&b.tendon_map.coeffs))
-            {
-                *c = lerp(*x, *y);
-            }
-        }
-    }
-    let (eo, en) = (&old.effects, &new.effects);
-    let e = &mut out.effects;
-    if let Some(l) = e.latency.as_mut() {
-        l.latency_s = lerp(
-            eo.latency.as_ref().map_or(0.0, |x| x.latency_s),
-            l.latency_s,
-        );
-    }
-    if let Some(b) = e.backlash.as_mut() {
-        let o = eo.backlash.as_ref().map_or([0.0; 3], |x| x.steps);
-        b.steps = std::array::from_fn(|i| lerp(o[i], b.steps[i]));
-    }
-    if let Some(c) = e.creep.as_mut() {
-        let o = eo.creep.as_ref().map_or([0.0; 3], |x| x.gain);
-        c.gain = std::array::from_fn(|i| lerp(o[i], c.gain[i]));
-        if let Some(oc) = &eo.creep {
-            c.time_constant_s = lerp(oc.time_constant_s, c.time_constant_s);
-        }
-    }
-    if let Some(d) = e.drift.as_mut() {
-        let o = eo.drift.as_ref().map_or([0.0; 3], |x| x.rate_mm_per_s);
-        d.rate_mm_per_s = std::array::from_fn(|i| lerp(o[i], d.rate_mm_per_s[i]));
-    }
-    if let Some(c) = e.compliance.as_mut() {
-        let z = Default::default();
-        let o: &pcr_robot::effects::Compliance = eo.compliance.as_ref().unwrap_or(&z);
-        c.force_n = [
-            lerp(o.force_n[0], c.force_n[0]),
-            lerp(o.force_n[1], c.force_n[1]),
-        ];
-        c.couple_n_mm = lerp(o.couple_n_mm, c.couple_n_mm);
-        c.k_m_n_mm_per_rad = lerp(o.k_m_n_mm_per_rad, c.k_m_n_mm_per_rad);
-        c.k_p_n_mm_per_rad = lerp(o.k_p_n_mm_per_rad, c.k_p_n_mm_per_rad);
-    }
-    if let Some(f) = e.frame.as_mut() {
-        let z = pcr_robot::effects::FrameCorrection {
-            dx_mm: 0.0,
-            dy_mm: 0.0,
-            dphi_deg: 0.0,
-        };
-        let o = eo.frame.as_ref().unwrap_or(&z);
-        f.dx_mm = lerp(o.dx_mm, f.dx_mm);
-        f.dy_mm = lerp(o.dy_mm, f.dy_mm);
-        f.dphi_deg = lerp(o.dphi_deg, f.dphi_deg);
-    }
-    if eo.periodic.len() <= en.periodic.len() {
-        for (k, p) in e.periodic.iter_mut().enumerate() {
-            let a0 = eo.periodic.get(k).map_or(0.0, |x| x.amplitude_steps);
-            p.amplitude_steps = lerp(a0, p.amplitude_steps);
-        }
-    }
-    out
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn backlash_is_a_dead_band() {
-        let mut q: Vec<[f64; 3]> = [0.0, 1.0, 3.0, 2.0, 1.0, 0.0, 3.0]
-            .iter()
-            .map(|v| [*v, *v, 0.0])
-            .collect();
-        apply_backlash(
-            &mut q,
-            &Backlash {
-                steps: [2.0, 0.0, 0.0],
-            },
-        );
-        let out: Vec<f64> = q.iter().map(|v| v[0]).collect();
-        assert_eq!(out, vec![0.0, 0.0, 2.0, 2.0, 2.0, 1.0, 2.0]);
-        assert_eq!(q[2][1], 3.0, "no play on motor 2");
-    }
 
     #[test]
     fn delayed_steps_interpolate_in_one_pass() {

@@ -1,14 +1,17 @@
 //! Whether an extended model is a physical explanation: its geometry near the drawing the
-//! analysis started from, springs and creep of the right sign, a small capture frame error, no
-//! motion that leads its command.
+//! analysis started from, and every effect it declares plausible
+//! ([`crate::effects::Effect::unphysical`]: springs and creep of the right sign, a small capture
+//! frame error, no motion that leads its command).
 
-use crate::attribution::Options;
+use crate::effects;
+use crate::options::Options;
 use pcr_robot::RobotConfig;
 
 /// Why a model is not a physical explanation, if it is not: its geometry more than
 /// `max_geometry_change` (mm, deg) away from the drawing the analysis started from (the
-/// calibration parameters would then only mimic another cause), or springs, creep or a latency
-/// of the wrong sign.
+/// calibration parameters would then only mimic another cause), or an effect's entry that is
+/// not physical. The effects' reasons are listed from the last entry of the robot file back to
+/// the first ([`crate::effects::Effect::file_position`]).
 pub(crate) fn unphysical(
     c: &RobotConfig,
     current: &RobotConfig,
@@ -53,40 +56,47 @@ pub(crate) fn unphysical(
             far.join(", ")
         ));
     }
-    let e = &c.effects;
-    if let Some(f) = &e.frame {
-        // A registration off by more than this would be seen at once: 1 deg is 5 mm at the
-        // base points.
-        if f.dx_mm.hypot(f.dy_mm) > lim || f.dphi_deg.abs() > lim / 3.0 {
-            why.push(format!(
-                "a capture frame off by ({:.2}, {:.2}) mm and {:.2} deg",
-                f.dx_mm, f.dy_mm, f.dphi_deg
-            ));
-        }
-    }
-    if let Some(k) = &e.compliance {
-        if k.k_m_n_mm_per_rad < 0.0 || k.k_p_n_mm_per_rad < 0.0 {
-            why.push(format!(
-                "negative joint springs (k_M {:.1}, k_P {:.1} N mm/rad)",
-                k.k_m_n_mm_per_rad, k.k_p_n_mm_per_rad
-            ));
-        }
-    }
-    if let Some(cr) = &e.creep {
-        if cr.gain.iter().any(|g| *g < 0.0) {
-            why.push(format!(
-                "a tendon that shortens under load (creep gains {:?})",
-                cr.gain
-            ));
-        }
-    }
-    if let Some(l) = &e.latency {
-        if l.latency_s < -0.01 {
-            why.push(format!(
-                "the motion leads the command by {:.3} s",
-                -l.latency_s
-            ));
-        }
+    for effect in effects::in_file_order().iter().rev() {
+        why.extend(effect.unphysical(&c.effects, lim));
     }
     (!why.is_empty()).then(|| format!("unphysical: {}", why.join(", ")))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use pcr_robot::effects::{Compliance, Creep, FrameCorrection, Latency};
+
+    #[test]
+    fn reasons_go_from_the_frame_back_to_the_latency() {
+        let drawing = RobotConfig::nominal();
+        let mut c = drawing.clone();
+        c.effects.latency = Some(Latency { latency_s: -0.05 });
+        c.effects.creep = Some(Creep {
+            gain: [-0.1, 0.0, 0.0],
+            time_constant_s: 10.0,
+        });
+        c.effects.compliance = Some(Compliance {
+            ei_n_mm2: 6.5e4,
+            k_m_n_mm_per_rad: -10.0,
+            ..Compliance::default()
+        });
+        c.effects.frame = Some(FrameCorrection {
+            dx_mm: 5.0,
+            dy_mm: 0.0,
+            dphi_deg: 0.0,
+        });
+        assert_eq!(
+            unphysical(&c, &drawing, &drawing, &Options::default()).as_deref(),
+            Some(
+                "unphysical: a capture frame off by (5.00, 0.00) mm and 0.00 deg, negative joint \
+                 springs (k_M -10.0, k_P 0.0 N mm/rad), a tendon that shortens under load (creep \
+                 gains [-0.1, 0.0, 0.0]), the motion leads the command by 0.050 s"
+            )
+        );
+        assert_eq!(
+            unphysical(&drawing, &drawing, &drawing, &Options::default()),
+            None
+        );
+    }
 }

@@ -11,201 +11,28 @@
 //! that.
 
 use crate::context::{wrap, Context};
-use crate::linear::{Columns, Nuisance};
+use crate::effects::{self, Parameter};
 use crate::model::ExtendedModel;
+use crate::nuisance::Nuisance;
 use crate::series::{Blocks, Series};
 use pcr_calibration::lsq::{self, Options, Problem};
 use pcr_robot::effects::Effects;
 use pcr_robot::RobotConfig;
 use rayon::prelude::*;
 
-/// A continuous effect parameter: (get, set, lower, upper).
-struct Slot {
-    get: fn(&Effects, usize) -> f64,
-    set: fn(&mut Effects, usize, f64),
-    index: usize,
-    lo: f64,
-    hi: f64,
-}
-
-fn slots(e: &Effects) -> Vec<Slot> {
-    let mut v = Vec::new();
-    if e.latency.is_some() {
-        v.push(Slot {
-            get: |e, _| e.latency.as_ref().map_or(0.0, |l| l.latency_s),
-            set: |e, _, x| {
-                if let Some(l) = e.latency.as_mut() {
-                    l.latency_s = x
-                }
-            },
-            index: 0,
-            lo: -0.2,
-            hi: 1.0,
-        });
-    }
-    if e.backlash.is_some() {
-        for i in 0..3 {
-            v.push(Slot {
-                get: |e, i| e.backlash.as_ref().map_or(0.0, |b| b.steps[i]),
-                set: |e, i, x| {
-                    if let Some(b) = e.backlash.as_mut() {
-                        b.steps[i] = x
-                    }
-                },
-                index: i,
-                lo: 0.0,
-                hi: 50.0,
-            });
-        }
-    }
-    if e.creep.is_some() {
-        for i in 0..3 {
-            v.push(Slot {
-                get: |e, i| e.creep.as_ref().map_or(0.0, |c| c.gain[i]),
-                set: |e, i, x| {
-                    if let Some(c) = e.creep.as_mut() {
-                        c.gain[i] = x
-                    }
-                },
-                index: i,
-                lo: -0.5,
-                hi: 0.5,
-            });
-        }
-        v.push(Slot {
-            get: |e, _| e.creep.as_ref().map_or(1.0, |c| c.time_constant_s.ln()),
-            set: |e, _, x| {
-                if let Some(c) = e.creep.as_mut() {
-                    c.time_constant_s = x.exp()
-                }
-            },
-            index: 0,
-            lo: 0.5f64.ln(),
-            hi: 5000f64.ln(),
-        });
-    }
-    if e.drift.is_some() {
-        for i in 0..3 {
-            v.push(Slot {
-                // mm per 1000 s, so that the solver's steps are of the order of the others.
-                get: |e, i| e.drift.as_ref().map_or(0.0, |d| 1e3 * d.rate_mm_per_s[i]),
-                set: |e, i, x| {
-                    if let Some(d) = e.drift.as_mut() {
-                        d.rate_mm_per_s[i] = 1e-3 * x
-                    }
-                },
-                index: i,
-                lo: -1e3,
-                hi: 1e3,
-            });
-        }
-    }
-    if let Some(c) = &e.compliance {
-        let active = [
-            c.force_n[0] != 0.0 || c.force_n[1] != 0.0 || c.couple_n_mm != 0.0,
-            c.k_m_n_mm_per_rad != 0.0 || c.k_p_n_mm_per_rad != 0.0,
-        ];
-        if active[0] {
-            for j in 0..3 {
-                v.push(Slot {
-                    get: |e, j| {
-                        e.compliance.as_ref().map_or(0.0, |c| match j {
-                            0 => c.force_n[0],
-                            1 => c.force_n[1],
-                            _ => c.couple_n_mm / 100.0,
-                        })
-                    },
-                    set: |e, j, x| {
-                        if let Some(c) = e.compliance.as_mut() {
-                            match j {
-                                0 => c.force_n[0] = x,
-                                1 => c.force_n[1] = x,
-                                _ => c.couple_n_mm = 100.0 * x,
-                            }
-                        }
-                    },
-                    index: j,
-                    lo: -50.0,
-                    hi: 50.0,
-                });
-            }
-        }
-        if active[1] {
-            for j in 0..2 {
-                v.push(Slot {
-                    get: |e, j| {
-                        e.compliance.as_ref().map_or(0.0, |c| {
-                            if j == 0 {
-                                c.k_m_n_mm_per_rad / 100.0
-                            } else {
-                                c.k_p_n_mm_per_rad / 100.0
-                            }
-                        })
-                    },
-                    set: |e, j, x| {
-                        if let Some(c) = e.compliance.as_mut() {
-                            if j == 0 {
-                                c.k_m_n_mm_per_rad = 100.0 * x
-                            } else {
-                                c.k_p_n_mm_per_rad = 100.0 * x
-                            }
-                        }
-                    },
-                    index: j,
-                    lo: -100.0,
-                    hi: 100.0,
-                });
-            }
-        }
-    }
-    if e.frame.is_some() {
-        for j in 0..3 {
-            v.push(Slot {
-                get: |e, j| {
-                    e.frame.as_ref().map_or(0.0, |f| match j {
-                        0 => f.dx_mm,
-                        1 => f.dy_mm,
-                        _ => f.dphi_deg,
-                    })
-                },
-                set: |e, j, x| {
-                    if let Some(f) = e.frame.as_mut() {
-                        match j {
-                            0 => f.dx_mm = x,
-                            1 => f.dy_mm = x,
-                            _ => f.dphi_deg = x,
-                        }
-                    }
-                },
-                index: j,
-                lo: -50.0,
-                hi: 50.0,
-            });
-        }
-    }
-    for k in 0..e.periodic.len() {
-        v.push(Slot {
-            get: |e, k| e.periodic[k].amplitude_steps,
-            set: |e, k, x| e.periodic[k].amplitude_steps = x,
-            index: k,
-            lo: -50.0,
-            hi: 50.0,
-        });
-        v.push(Slot {
-            get: |e, k| e.periodic[k].phase_deg,
-            set: |e, k, x| e.periodic[k].phase_deg = x,
-            index: k,
-            lo: -720.0,
-            hi: 720.0,
-        });
-    }
-    v
+/// The continuous parameters of every effect `e` declares, in the order of the robot file's
+/// entries ([`crate::effects::Effect::file_position`]).
+fn slots(e: &Effects) -> Vec<Parameter> {
+    effects::in_file_order()
+        .iter()
+        .flat_map(|x| x.parameters(e))
+        .collect()
 }
 
 struct Refit<'a> {
     base: &'a RobotConfig,
     like: &'a ExtendedModel,
-    slots: Vec<Slot>,
+    slots: Vec<Parameter>,
     series: &'a [Series],
     rows: Vec<Vec<usize>>,
     n: usize,
@@ -219,7 +46,7 @@ struct Refit<'a> {
 struct Linearised {
     nui: Nuisance,
     /// Per refined row (in `Refit::rows` order), its columns, if the model predicts the row.
-    cols: Vec<Option<Columns>>,
+    cols: Vec<Option<Vec<[f64; 3]>>>,
     /// sqrt(1 / sigma^2) of each parameter.
     prior_sqrt: Vec<f64>,
 }
@@ -228,7 +55,7 @@ impl Linearised {
     /// `share`: the refined rows' share of the training rows (the prior is the candidates'
     /// prior on every training row, so it weighs the same against the data on a subsample).
     fn new(ctx: &Context, rows: &[Vec<usize>], share: f64) -> Linearised {
-        let nui = Nuisance::of(ctx);
+        let nui = Nuisance::of(&ctx.model.config);
         let index: std::collections::HashMap<(usize, usize), usize> = ctx
             .rows
             .iter()
@@ -246,7 +73,7 @@ impl Linearised {
             .map(|i| {
                 i.map(|i| {
                     let mut c = vec![[0.0; 3]; nui.n];
-                    nui.columns(ctx, i, &mut c, 0);
+                    nui.columns(&ctx.model.robot, ctx.pred(&ctx.rows[i]), ctx.w_phi, &mut c);
                     c
                 })
             })
@@ -481,5 +308,68 @@ pub fn refine(
     match lsq::solve(&mut p, &x0, &lo, &hi, &opts) {
         Ok(fit) => p.config(&fit.x),
         Err(_) => config.clone(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use pcr_robot::effects::{
+        Backlash, Compliance, Creep, Drift, FrameCorrection, Latency, Periodic,
+    };
+
+    #[test]
+    fn the_parameters_are_in_the_robot_files_order() {
+        let e = Effects {
+            latency: Some(Latency { latency_s: 0.01 }),
+            backlash: Some(Backlash {
+                steps: [1.0, 2.0, 3.0],
+            }),
+            creep: Some(Creep {
+                gain: [0.1, 0.2, 0.3],
+                time_constant_s: 1.0,
+            }),
+            drift: Some(Drift {
+                rate_mm_per_s: [4e-3, 5e-3, 6e-3],
+            }),
+            compliance: Some(Compliance {
+                ei_n_mm2: 6.5e4,
+                force_n: [7.0, 8.0],
+                couple_n_mm: 900.0,
+                k_m_n_mm_per_rad: 1000.0,
+                k_p_n_mm_per_rad: 1100.0,
+            }),
+            frame: Some(FrameCorrection {
+                dx_mm: 12.0,
+                dy_mm: 13.0,
+                dphi_deg: 14.0,
+            }),
+            periodic: vec![Periodic {
+                motor: 1,
+                period_steps: 16.0,
+                amplitude_steps: 15.0,
+                phase_deg: 16.0,
+            }],
+        };
+        let values: Vec<f64> = slots(&e).iter().map(|s| (s.get)(&e, s.index)).collect();
+        let expected = [
+            0.01, 1.0, 2.0, 3.0, 0.1, 0.2, 0.3, 0.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0,
+            12.0, 13.0, 14.0, 15.0, 16.0,
+        ];
+        assert_eq!(values.len(), expected.len());
+        for (v, x) in values.iter().zip(expected) {
+            assert!((v - x).abs() < 1e-12, "{values:?}");
+        }
+        // Springs or a wrench alone free only theirs.
+        let springs = Effects {
+            compliance: Some(Compliance {
+                ei_n_mm2: 6.5e4,
+                k_m_n_mm_per_rad: 100.0,
+                ..Compliance::default()
+            }),
+            ..Effects::default()
+        };
+        assert_eq!(slots(&springs).len(), 2);
+        assert!(slots(&Effects::default()).is_empty());
     }
 }

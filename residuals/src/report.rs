@@ -22,7 +22,7 @@ pub enum ReportError {
     Figure(#[from] FigureError),
 }
 
-fn fmt_param(p: &crate::candidates::Estimate) -> String {
+fn fmt_param(p: &crate::fitted::Estimate) -> String {
     match p.std {
         Some(s) => format!("{} = {:.4} ± {:.4} {}", p.name, p.value, s, p.unit),
         None => format!("{} = {:.4} {}", p.name, p.value, p.unit),

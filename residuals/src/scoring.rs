@@ -6,9 +6,9 @@
 //! capture noise, or, failing these, when it is the simpler explanation of what the
 //! recalibration explains (parsimony).
 
-use crate::attribution::Options;
-use crate::candidates::{Estimate, Fitted};
 use crate::context::Context;
+use crate::fitted::{Estimate, Fitted};
+use crate::options::Options;
 use crate::series::Blocks;
 use serde::Serialize;
 use statrs::distribution::{ContinuousCDF, StudentsT};
@@ -57,9 +57,9 @@ pub(crate) struct Reference<'r> {
     pub k: usize,
     /// The recalibration's held-out gain (mean square per row, mm^2), for the parsimony rule;
     /// `None` when the candidate is the recalibration itself.
-    pub geometry_gain_ms: Option<f64>,
+    pub recalibration_gain_ms: Option<f64>,
     /// Whether the recalibration was significant this round.
-    pub geometry_significant: bool,
+    pub recalibration_significant: bool,
 }
 
 impl<'r> Reference<'r> {
@@ -69,8 +69,8 @@ impl<'r> Reference<'r> {
             delta: None,
             train_sse: ctx.sse(train, None),
             k: 0,
-            geometry_gain_ms: None,
-            geometry_significant: false,
+            recalibration_gain_ms: None,
+            recalibration_significant: false,
         }
     }
 }
@@ -183,7 +183,7 @@ impl Round<'_, '_> {
     /// a significant recalibration gains, significantly, is the simpler explanation of the same
     /// residual. `raw`: the held-out sum of squares of the model as it is.
     fn simpler_than_recalibration(&self, f: &Fitted, reference: &Reference, raw: f64) -> bool {
-        let (Some(alone), Some(geo)) = (&f.alone, reference.geometry_gain_ms) else {
+        let (Some(alone), Some(recal)) = (&f.alone, reference.recalibration_gain_ms) else {
             return false;
         };
         let (ctx, test, nb) = (self.ctx, self.test, self.blocks.len());
@@ -192,9 +192,9 @@ impl Round<'_, '_> {
         let sc: f64 = c.iter().sum();
         let gain = (raw - sc) / test.len().max(1) as f64;
         let pa = paired_p(&raw_b, &c, &self.blocks.held_out);
-        reference.geometry_significant
-            && geo > 0.0
-            && gain >= 0.9 * geo
+        reference.recalibration_significant
+            && recal > 0.0
+            && gain >= 0.9 * recal
             && pa < self.alpha()
             && gain.sqrt() >= self.opts.min_effect_mm
     }

@@ -53,7 +53,9 @@ fn record(truth: &RobotConfig, seconds: f64, noise_mm: f64, seed: u64) -> Record
         ..Recording::default()
     };
     let s = Series::from_recording(&rec_with_dummy_pose(&rec), "truth").unwrap();
-    let preds = ExtendedModel::new(truth).unwrap().predict(&s);
+    let preds = ExtendedModel::new(truth, pcr_residuals::effects::chain())
+        .unwrap()
+        .predict(&s);
     for (r, p) in rec.rows.iter_mut().zip(preds) {
         let p = p
             .pose

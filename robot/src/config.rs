@@ -1,7 +1,7 @@
 //! The robot configuration file (`configs/robot.toml`): loading and validation.
 
 use crate::effects::Effects;
-use crate::tendon_map::{TendonMapKind, TendonMapSpec};
+use crate::tendon_map::{MapReading, TendonMapKind, TendonMapSpec};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -416,6 +416,37 @@ impl RobotConfig {
             if let Some(c) = tm.coeffs.iter().find(|c| !c.is_finite()) {
                 return Err(bad(k("tendon_map.coeffs"), c.to_string(), "must be finite"));
             }
+            match tm.reading {
+                MapReading::Symmetric if !tm.coeffs_neg.is_empty() => {
+                    return Err(bad(
+                        k("tendon_map.coeffs_neg"),
+                        format!("{:?}", tm.coeffs_neg),
+                        "is read only with reading = \"asymmetric\"",
+                    ));
+                }
+                MapReading::Asymmetric => {
+                    let want = tm.model.n_direction_coeffs();
+                    if empty_linear || tm.coeffs_neg.len() != want {
+                        return Err(bad(
+                            k("tendon_map.coeffs_neg"),
+                            format!("{:?}", tm.coeffs_neg),
+                            &format!(
+                                "the asymmetric reading of model `{}` takes {} coefficient(s) in `coeffs` and {want} in `coeffs_neg` (the dl < 0 direction, without k0)",
+                                tm.model,
+                                tm.model.n_coeffs(),
+                            ),
+                        ));
+                    }
+                    if let Some(c) = tm.coeffs_neg.iter().find(|c| !c.is_finite()) {
+                        return Err(bad(
+                            k("tendon_map.coeffs_neg"),
+                            c.to_string(),
+                            "must be finite",
+                        ));
+                    }
+                }
+                MapReading::Symmetric => {}
+            }
         }
         if let Err((key, value, reason)) = self.effects.check() {
             return Err(bad(key, value, &reason));
@@ -475,13 +506,43 @@ mod tests {
             .to_string();
         assert!(e.contains("three legs"), "{e}");
         let mut c = RobotConfig::nominal();
-        c.legs[2].tendon_map = TendonMapSpec {
-            model: TendonMapKind::Poly3,
-            coeffs: vec![1.0],
-        };
+        c.legs[2].tendon_map = TendonMapSpec::symmetric(TendonMapKind::Poly3, vec![1.0]);
         let e = RobotConfig::from_toml_str(&c.to_toml_string(), "r.toml")
             .unwrap_err()
             .to_string();
         assert!(e.contains("legs[3].tendon_map.coeffs"), "{e}");
+        let mut c = RobotConfig::nominal();
+        c.legs[1].tendon_map = TendonMapSpec {
+            reading: MapReading::Asymmetric,
+            coeffs_neg: vec![1e-3],
+            ..TendonMapSpec::symmetric(TendonMapKind::Poly2, vec![0.0, 1e-3, 1e-6])
+        };
+        let e = RobotConfig::from_toml_str(&c.to_toml_string(), "r.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("legs[2].tendon_map.coeffs_neg") && e.contains("2 in `coeffs_neg`"),
+            "{e}"
+        );
+        c.legs[1].tendon_map.reading = MapReading::Symmetric;
+        let e = RobotConfig::from_toml_str(&c.to_toml_string(), "r.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("only with reading"), "{e}");
+    }
+
+    #[test]
+    fn an_asymmetric_map_round_trips() {
+        let mut c = RobotConfig::nominal();
+        c.legs[0].tendon_map = TendonMapSpec {
+            reading: MapReading::Asymmetric,
+            coeffs_neg: vec![1.1e-3, -2e-6],
+            ..TendonMapSpec::symmetric(TendonMapKind::Poly2, vec![1e-5, 1e-3, 1e-6])
+        };
+        let text = c.to_toml_string();
+        assert!(text.contains("reading = \"asymmetric\""), "{text}");
+        let back = RobotConfig::from_toml_str(&text, "x").unwrap();
+        assert_eq!(c, back);
+        assert!(!RobotConfig::nominal().to_toml_string().contains("reading"));
     }
 }

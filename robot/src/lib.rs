@@ -16,4 +16,4 @@ pub mod tendon_map;
 pub use config::{Actuation, ConfigError, LegConfig, Limits, RobotConfig, WorkingMode};
 pub use effects::Effects;
 pub use geometry::{rot, Vec2};
-pub use tendon_map::{TendonMapKind, TendonMapSpec};
+pub use tendon_map::{MapForm, MapReading, TendonMapKind, TendonMapSpec};

@@ -11,11 +11,18 @@
 //! offset. So `dl^2` reads `dl |dl|`, `dl^(1/n)` reads `sgn(dl) |dl|^(1/n)`, and `ln(dl)` reads
 //! `sgn(dl) ln(1 + |dl|)` (ln(dl) has a pole at dl = 0, inside the tendons' travel; `ln(1 + dl)`
 //! is finite there, has slope 1 at zero from both sides, and tends to ln(dl) for large dl).
+//!
+//! That extension assumes a leg that bends alike both ways. Each form has a second reading,
+//! [`MapReading::Asymmetric`], for legs that do not (pretension, friction and tendon routing
+//! differ between the two tendons of a pair): for dl >= 0 the form exactly as the paper writes it
+//! (`coeffs`), for dl < 0 the same odd-extended form with its own coefficients (`coeffs_neg`,
+//! the other tendon's map); the two share the offset k0, so the map stays continuous at dl = 0.
+//! The symmetric reading is the asymmetric one with `coeffs_neg` equal to `coeffs` without k0.
 
 use serde::{Deserialize, Serialize};
 
 /// The regression families. `dl` is the signed tendon displacement in mm, kappa in 1/mm.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum TendonMapKind {
     /// kappa = k1 dl (paper eq. 1 when k1 = 1/(a l_C)).
@@ -78,6 +85,12 @@ impl TendonMapKind {
             TendonMapKind::Root5 => 6,
             TendonMapKind::Root6 => 7,
         }
+    }
+
+    /// Number of coefficients of one bending direction in the asymmetric reading: all but the
+    /// shared offset k0.
+    pub fn n_direction_coeffs(self) -> usize {
+        self.n_coeffs() - usize::from(self.has_offset())
     }
 
     /// Whether the first coefficient is the constant offset k0.
@@ -163,26 +176,197 @@ impl std::fmt::Display for TendonMapKind {
     }
 }
 
+/// How a Table I form is read for the two bending directions.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MapReading {
+    /// One set of coefficients for both directions: the odd extension of the paper's form
+    /// (a leg that bends alike both ways).
+    #[default]
+    Symmetric,
+    /// Separate coefficients per direction, sharing the offset k0: the paper's form for
+    /// dl >= 0, its odd extension with other coefficients for dl < 0.
+    Asymmetric,
+}
+
+impl MapReading {
+    /// Both readings, symmetric first.
+    pub const ALL: [MapReading; 2] = [MapReading::Symmetric, MapReading::Asymmetric];
+
+    /// Whether this is the symmetric reading (the default, not written to files).
+    pub fn is_symmetric(&self) -> bool {
+        *self == MapReading::Symmetric
+    }
+
+    /// The name used in configuration files and reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            MapReading::Symmetric => "symmetric",
+            MapReading::Asymmetric => "asymmetric",
+        }
+    }
+}
+
+impl std::fmt::Display for MapReading {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// A Table I function in one reading: the shape a leg's map is fitted as.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
+pub struct MapForm {
+    /// The Table I function.
+    pub kind: TendonMapKind,
+    /// How it is read for dl < 0.
+    pub reading: MapReading,
+}
+
+impl MapForm {
+    /// The symmetric (odd-extended) reading of `kind`.
+    pub const fn symmetric(kind: TendonMapKind) -> MapForm {
+        MapForm {
+            kind,
+            reading: MapReading::Symmetric,
+        }
+    }
+
+    /// The asymmetric (per-direction) reading of `kind`.
+    pub const fn asymmetric(kind: TendonMapKind) -> MapForm {
+        MapForm {
+            kind,
+            reading: MapReading::Asymmetric,
+        }
+    }
+
+    /// Number of coefficients of the form: `coeffs`, then `coeffs_neg` in the asymmetric
+    /// reading (the flat order of [`TendonMapSpec::flat_coeffs`]).
+    pub fn n_coeffs(self) -> usize {
+        match self.reading {
+            MapReading::Symmetric => self.kind.n_coeffs(),
+            MapReading::Asymmetric => self.kind.n_coeffs() + self.kind.n_direction_coeffs(),
+        }
+    }
+
+    /// Name of flat coefficient `j`: `k0`, `k1`, ... then `k1_neg`, ... (families without an
+    /// offset: `k0_neg`).
+    pub fn coeff_name(self, j: usize) -> String {
+        let n = self.kind.n_coeffs();
+        if j < n {
+            format!("k{j}")
+        } else {
+            let off = usize::from(self.kind.has_offset());
+            format!("k{}_neg", j - n + off)
+        }
+    }
+
+    /// The coefficient of `coeffs` that flat coefficient `j` mirrors (the same power of dl).
+    pub fn mirrored(self, j: usize) -> usize {
+        let n = self.kind.n_coeffs();
+        if j < n {
+            j
+        } else {
+            j - n + usize::from(self.kind.has_offset())
+        }
+    }
+
+    /// The form as evaluated for every dl.
+    pub fn evaluated_form(self) -> String {
+        match self.reading {
+            MapReading::Symmetric => self.kind.extended_form().to_string(),
+            MapReading::Asymmetric => format!(
+                "{} for dl >= 0; k_neg for dl < 0, sharing k0",
+                self.kind.paper_form()
+            ),
+        }
+    }
+
+    /// Short label: the Table I number, `a` for the asymmetric reading (`13`, `13a`).
+    pub fn label(self) -> String {
+        match self.reading {
+            MapReading::Symmetric => self.kind.table_index().to_string(),
+            MapReading::Asymmetric => format!("{}a", self.kind.table_index()),
+        }
+    }
+}
+
+impl std::fmt::Display for MapForm {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} ({})", self.kind, self.reading)
+    }
+}
+
 /// A tendon map of one leg as written in the robot configuration.
 ///
 /// `coeffs` are the coefficients in the order the paper's form names them, k0 first (kappa in
 /// 1/mm, dl in mm; the units of each coefficient follow from its basis function). An empty `coeffs` with `model = "linear"` means the nominal map
 /// kappa = dl / (a l_C) of geometry.md.
+///
+/// With `reading = "asymmetric"`, `coeffs` apply for dl >= 0 (the paper's form as written) and
+/// `coeffs_neg` for dl < 0: the non-constant coefficients of the other direction (k1, k2, ...;
+/// for the families without an offset, k0), evaluated in the odd-extended form, so that equal
+/// lists give the symmetric map.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct TendonMapSpec {
     /// Which regression family.
     pub model: TendonMapKind,
-    /// Its coefficients (see the family for their order).
+    /// How the family is read for dl < 0 (default: symmetric).
+    #[serde(default, skip_serializing_if = "MapReading::is_symmetric")]
+    pub reading: MapReading,
+    /// Its coefficients (see the family for their order); for dl >= 0 in the asymmetric reading.
     #[serde(default)]
     pub coeffs: Vec<f64>,
+    /// The asymmetric reading's coefficients for dl < 0 (without k0).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub coeffs_neg: Vec<f64>,
 }
 
 impl Default for TendonMapSpec {
     fn default() -> Self {
+        TendonMapSpec::symmetric(TendonMapKind::Linear, Vec::new())
+    }
+}
+
+impl TendonMapSpec {
+    /// A symmetric map of `model` with `coeffs`.
+    pub fn symmetric(model: TendonMapKind, coeffs: Vec<f64>) -> TendonMapSpec {
         TendonMapSpec {
-            model: TendonMapKind::Linear,
-            coeffs: Vec::new(),
+            model,
+            reading: MapReading::Symmetric,
+            coeffs,
+            coeffs_neg: Vec::new(),
         }
+    }
+
+    /// The map of `form` with the flat coefficient vector `x` (`coeffs`, then `coeffs_neg`).
+    pub fn from_flat(form: MapForm, x: &[f64]) -> TendonMapSpec {
+        let n = form.kind.n_coeffs().min(x.len());
+        TendonMapSpec {
+            model: form.kind,
+            reading: form.reading,
+            coeffs: x[..n].to_vec(),
+            coeffs_neg: match form.reading {
+                MapReading::Symmetric => Vec::new(),
+                MapReading::Asymmetric => x[n..].to_vec(),
+            },
+        }
+    }
+
+    /// The family and reading.
+    pub fn form(&self) -> MapForm {
+        MapForm {
+            kind: self.model,
+            reading: self.reading,
+        }
+    }
+
+    /// Every coefficient in the flat order of [`MapForm::n_coeffs`]: `coeffs`, then `coeffs_neg`.
+    pub fn flat_coeffs(&self) -> Vec<f64> {
+        self.coeffs
+            .iter()
+            .chain(&self.coeffs_neg)
+            .copied()
+            .collect()
     }
 }

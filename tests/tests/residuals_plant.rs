@@ -220,7 +220,7 @@ fn another_labs_logger_at_half_the_rate_gives_the_same_backlash() {
     assert!(b.timing_finding.is_none(), "{:?}", b.timing);
     assert!(names(&a).contains(&"backlash"), "{}", report(&a));
     // Half the rows: the parameters agree within two standard errors of the coarser file.
-    let params = |x: &Attribution| -> Vec<pcr_residuals::candidates::Estimate> {
+    let params = |x: &Attribution| -> Vec<pcr_residuals::Estimate> {
         x.effects.iter().flat_map(|e| e.params.clone()).collect()
     };
     for (x, y) in params(&a).iter().zip(&params(&b)) {

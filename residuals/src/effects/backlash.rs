@@ -1,0 +1,230 @@
+//! `backlash`: gear backlash or friction hysteresis. The output of each motor follows it
+//! through a play of `b_i` steps (`[effects.backlash]`); the drive adds half the play in the
+//! direction of motion.
+
+use super::joint_fit::{fit_joint, nuisance_change};
+use super::motor_change::motor_change;
+use super::profile::{minimise_1d, profile_std, search_rows, sse_at};
+use super::{lerp, Effect, Parameter};
+use crate::context::Context;
+use crate::extension::Extension;
+use crate::fitted::{Estimate, Fitted};
+use crate::linear::motor_delta;
+use pcr_robot::effects::{self as robot, Effects};
+use pcr_robot::RobotConfig;
+
+/// The `backlash` candidate.
+#[derive(Debug)]
+pub struct Backlash;
+
+/// Backlash on motor outputs (steps, one entry per row), in place: each motor's output
+/// follows it through a dead band of `b.steps` (starting at the first row's position).
+pub fn apply(q: &mut [[f64; 3]], b: &robot::Backlash) {
+    for i in 0..3 {
+        if b.steps[i] == 0.0 {
+            continue;
+        }
+        let h = 0.5 * b.steps[i];
+        let mut out = q.first().map_or(0.0, |v| v[i]);
+        for v in q.iter_mut() {
+            out = out.clamp(v[i] - h, v[i] + h);
+            v[i] = out;
+        }
+    }
+}
+
+/// The output of motor `m` through a play of `b` steps (as [`apply`] computes it), written to
+/// `out`.
+fn play_on(q: &[[f64; 3]], m: usize, b: f64, out: &mut [f64]) {
+    if b == 0.0 {
+        for (o, v) in out.iter_mut().zip(q) {
+            *o = v[m];
+        }
+        return;
+    }
+    let h = 0.5 * b;
+    let mut y = q.first().map_or(0.0, |v| v[m]);
+    for (o, v) in out.iter_mut().zip(q) {
+        y = y.clamp(v[m] - h, v[m] + h);
+        *o = y;
+    }
+}
+
+impl Extension for Backlash {
+    /// The declared play on every motor.
+    fn play(&self, effects: &Effects, q: &mut [[f64; 3]]) {
+        if let Some(b) = &effects.backlash {
+            apply(q, b);
+        }
+    }
+}
+
+impl Effect for Backlash {
+    fn name(&self) -> &'static str {
+        "backlash"
+    }
+
+    fn description(&self) -> &'static str {
+        "gear backlash / friction hysteresis: the output follows each motor through a play"
+    }
+
+    /// Play of b_i steps on each motor: a profile over each motor's play in turn (two sweeps),
+    /// then the calibration parameters with the change at the plays found.
+    fn fit(&self, ctx: &Context, train: &[usize]) -> Option<Fitted> {
+        let e = &ctx.model.config.effects;
+        let pre: Vec<Vec<[f64; 3]>> = ctx
+            .series
+            .iter()
+            .map(|s| ctx.model.steps_before_play(s, e))
+            .collect();
+        let rows = search_rows(train);
+        let delta_of = |b: [f64; 3], rows: Option<&[usize]>| -> Vec<[f64; 3]> {
+            let q_new: Vec<Vec<[f64; 3]>> = pre
+                .iter()
+                .map(|q| {
+                    let mut q = q.clone();
+                    apply(&mut q, &robot::Backlash { steps: b });
+                    q
+                })
+                .collect();
+            motor_change(ctx, &q_new, rows)
+        };
+        // From scratch: every play up to 20 steps. Once the model holds a play (a Gauss-Newton
+        // step of its acceptance), the play moves little from one step to the next: 3 steps
+        // around it.
+        let held = e.backlash.as_ref().map(|b| b.steps);
+        let grid_of = |m: usize| -> Vec<f64> {
+            match held {
+                None => (0..=40).map(|k| 0.5 * k as f64).collect(),
+                Some(h) => (-6..=6)
+                    .map(|k| h[m] + 0.5 * k as f64)
+                    .filter(|v| *v >= 0.0)
+                    .collect(),
+            }
+        };
+        let mut b = [0.0; 3];
+        let mut stds = [None; 3];
+        // The play acts on each motor alone: a profile over motor m's play runs the play
+        // operator on that motor only, the others' outputs held at the current plays.
+        let mut cur: Vec<Vec<[f64; 3]>> = pre
+            .iter()
+            .map(|q| {
+                let mut q = q.clone();
+                apply(&mut q, &robot::Backlash { steps: b });
+                q
+            })
+            .collect();
+        let mut col: Vec<Vec<f64>> = pre.iter().map(|q| vec![0.0; q.len()]).collect();
+        for _sweep in 0..2 {
+            for m in 0..3 {
+                let (x, s, curv) = minimise_1d(
+                    &mut |v| {
+                        for (c, q) in col.iter_mut().zip(&pre) {
+                            play_on(q, m, v.max(0.0), c);
+                        }
+                        let d: Vec<[f64; 3]> = rows
+                            .iter()
+                            .map(|&i| {
+                                let row = &ctx.rows[i];
+                                let q = ctx.pred(row).q_eff;
+                                let mut o = cur[row.s][row.k];
+                                o[m] = col[row.s][row.k];
+                                motor_delta(ctx, i, [o[0] - q[0], o[1] - q[1], o[2] - q[2]])
+                            })
+                            .collect();
+                        sse_at(ctx, &rows, &d)
+                    },
+                    &grid_of(m),
+                );
+                b[m] = x.max(0.0);
+                stds[m] = profile_std(s, 3 * rows.len(), curv);
+                for (c, q) in cur.iter_mut().zip(&pre) {
+                    let mut out = vec![0.0; q.len()];
+                    play_on(q, m, b[m], &mut out);
+                    for (v, o) in c.iter_mut().zip(out) {
+                        v[m] = o;
+                    }
+                }
+            }
+        }
+        let nui = ctx.nuisance().nui.clone();
+        let off = delta_of(b, None);
+        let (fit, delta, alone) = fit_joint(ctx, &nui, train, 0, &|_, _| {}, Some(&off))?;
+        let nuis = nuisance_change(nui, fit.x.clone(), 0);
+        Some(Fitted {
+            name: self.name(),
+            params: (0..3)
+                .map(|m| Estimate::new(&format!("play motor {}", m + 1), b[m], stds[m], "steps"))
+                .collect(),
+            k: 3,
+            delta,
+            alone,
+            train_sse: fit.sse,
+            change: Box::new(move |c| {
+                c.effects.backlash = Some(robot::Backlash { steps: b });
+                nuis(c);
+            }),
+        })
+    }
+
+    fn declared(&self, effects: &Effects) -> Option<Vec<Estimate>> {
+        effects.backlash.as_ref().map(|b| {
+            (0..3)
+                .map(|i| Estimate::new(&format!("play motor {}", i + 1), b.steps[i], None, "steps"))
+                .collect()
+        })
+    }
+
+    fn file_position(&self) -> u8 {
+        2
+    }
+
+    /// The play of each motor, steps.
+    fn parameters(&self, effects: &Effects) -> Vec<Parameter> {
+        if effects.backlash.is_none() {
+            return Vec::new();
+        }
+        (0..3)
+            .map(|i| Parameter {
+                get: |e, i| e.backlash.as_ref().map_or(0.0, |b| b.steps[i]),
+                set: |e, i, x| {
+                    if let Some(b) = e.backlash.as_mut() {
+                        b.steps[i] = x
+                    }
+                },
+                index: i,
+                lo: 0.0,
+                hi: 50.0,
+            })
+            .collect()
+    }
+
+    fn blend(&self, old: &RobotConfig, new: &mut RobotConfig, s: f64) {
+        if let Some(b) = new.effects.backlash.as_mut() {
+            let o = old.effects.backlash.as_ref().map_or([0.0; 3], |x| x.steps);
+            b.steps = std::array::from_fn(|i| lerp(o[i], b.steps[i], s));
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn backlash_is_a_dead_band() {
+        let mut q: Vec<[f64; 3]> = [0.0, 1.0, 3.0, 2.0, 1.0, 0.0, 3.0]
+            .iter()
+            .map(|v| [*v, *v, 0.0])
+            .collect();
+        apply(
+            &mut q,
+            &robot::Backlash {
+                steps: [2.0, 0.0, 0.0],
+            },
+        );
+        let out: Vec<f64> = q.iter().map(|v| v[0]).collect();
+        assert_eq!(out, vec![0.0, 0.0, 2.0, 2.0, 2.0, 1.0, 2.0]);
+        assert_eq!(q[2][1], 3.0, "no play on motor 2");
+    }
+}

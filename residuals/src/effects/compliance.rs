@@ -1,0 +1,100 @@
+//! The kineto-static compliance `joint_springs` and `external_load` share: the robot file's
+//! `[effects.compliance]` (the segments bend under the link forces, loaded by springs in the
+//! passive joints and by a wrench on the platform; `kinematics/src/statics.rs`), its part of
+//! the prediction, and the fit of some of its five load parameters with the calibration
+//! parameters.
+
+use super::joint_fit::{fit_joint, nuisance_change};
+use crate::context::Context;
+use crate::fitted::{Estimate, Fitted};
+use crate::linear::Columns;
+use pcr_kinematics::statics::Loads;
+use pcr_robot::effects::{Compliance, Effects};
+
+/// Bending stiffness assumed for the compliance candidates when the robot file declares none,
+/// N mm^2 (the segments' nominal value; the loads found scale with it).
+pub const DEFAULT_EI: f64 = 6.5e4;
+
+/// The loads of the kineto-static model, when the robot file declares a compliance.
+pub fn loads(effects: &Effects) -> Option<Loads> {
+    effects.compliance.as_ref().map(Loads::from_compliance)
+}
+
+/// The compliance of a robot file's effects, zero loads with [`DEFAULT_EI`] when it declares
+/// none.
+pub fn held(effects: &Effects) -> Compliance {
+    effects.compliance.clone().unwrap_or(Compliance {
+        ei_n_mm2: DEFAULT_EI,
+        force_n: [0.0; 2],
+        couple_n_mm: 0.0,
+        k_m_n_mm_per_rad: 0.0,
+        k_p_n_mm_per_rad: 0.0,
+    })
+}
+
+/// The kineto-static fit: `which` selects the load parameters freed (indices into force x,
+/// force y, couple, k_M, k_P), added to those the model holds; `name` is the candidate's. EI
+/// comes from the robot file or [`DEFAULT_EI`].
+pub(crate) fn fit(
+    ctx: &Context,
+    train: &[usize],
+    name: &'static str,
+    which: &[usize],
+) -> Option<Fitted> {
+    let base = held(&ctx.model.config.effects);
+    let loads = Loads::from_compliance(&base);
+    // Per-row responses (per N, per 100 N mm, per 100 N mm/rad for conditioning).
+    let scale = [1.0, 1.0, 100.0, 100.0, 100.0];
+    let resp = ctx.load_responses(&loads);
+    let n_e = which.len();
+    let effect = |i: usize, c: &mut Columns| {
+        for (a, &j) in which.iter().enumerate() {
+            let r = resp[i][j];
+            c[a] = [
+                r[0] * scale[j],
+                r[1] * scale[j],
+                r[2] * scale[j] * ctx.w_phi,
+            ];
+        }
+    };
+    let nui = ctx.nuisance().nui.clone();
+    let (fit, delta, alone) = fit_joint(ctx, &nui, train, n_e, &effect, None)?;
+    let mut v = [0.0; 5];
+    let mut sd = [None; 5];
+    for (a, &j) in which.iter().enumerate() {
+        v[j] = fit.x[a] * scale[j];
+        sd[j] = Some(fit.std[a] * scale[j]);
+    }
+    let new = Compliance {
+        ei_n_mm2: base.ei_n_mm2,
+        force_n: [base.force_n[0] + v[0], base.force_n[1] + v[1]],
+        couple_n_mm: base.couple_n_mm + v[2],
+        k_m_n_mm_per_rad: base.k_m_n_mm_per_rad + v[3],
+        k_p_n_mm_per_rad: base.k_p_n_mm_per_rad + v[4],
+    };
+    let all = [
+        ("force x", new.force_n[0], "N"),
+        ("force y", new.force_n[1], "N"),
+        ("couple", new.couple_n_mm, "N mm"),
+        ("k_M", new.k_m_n_mm_per_rad, "N mm/rad"),
+        ("k_P", new.k_p_n_mm_per_rad, "N mm/rad"),
+    ];
+    let mut params: Vec<Estimate> = which
+        .iter()
+        .map(|&j| Estimate::new(all[j].0, all[j].1, sd[j], all[j].2))
+        .collect();
+    params.push(Estimate::new("EI (assumed)", new.ei_n_mm2, None, "N mm^2"));
+    let nuis = nuisance_change(nui, fit.x.clone(), n_e);
+    Some(Fitted {
+        name,
+        params,
+        k: n_e,
+        delta,
+        alone,
+        train_sse: fit.sse,
+        change: Box::new(move |c| {
+            c.effects.compliance = Some(new.clone());
+            nuis(c);
+        }),
+    })
+}

@@ -1,0 +1,86 @@
+//! The joint fit of a candidate with the calibration parameters ([`crate::nuisance`]): the
+//! effect's columns first, then the nuisance's, with the nuisance's prior; and the change of
+//! the robot file its nuisance part makes.
+
+use crate::context::Context;
+use crate::linear::{self, Columns};
+use crate::nuisance::Nuisance;
+use pcr_robot::RobotConfig;
+
+/// A joint fit: the solution, every row's change, and the effect's change alone.
+pub(crate) type JointFit = (linear::LinearFit, Vec<[f64; 3]>, Option<Vec<[f64; 3]>>);
+
+/// Fits with the nuisance: effect columns first, then the calibration parameters. `offset` is a
+/// fixed change of the residual (an effect with no free linear parameter at the chosen value).
+pub(crate) fn fit_joint(
+    ctx: &Context,
+    nui: &Nuisance,
+    train: &[usize],
+    n_e: usize,
+    effect: &dyn Fn(usize, &mut Columns),
+    offset: Option<&[[f64; 3]]>,
+) -> Option<JointFit> {
+    let n_g = nui.n;
+    let n = n_e + n_g;
+    let mut prior = vec![0.0; n_e];
+    prior.extend(nui.prior().into_iter().take(n_g));
+    if n == 0 {
+        // Nothing free: the offset alone (a profiled effect without the nuisance).
+        let o = offset?;
+        let sse = ctx.sse(train, Some(o));
+        return Some((
+            linear::LinearFit {
+                x: Vec::new(),
+                std: Vec::new(),
+                sse,
+            },
+            o.to_vec(),
+            Some(o.to_vec()),
+        ));
+    }
+    let alone = match offset {
+        Some(o) => Some(o.to_vec()),
+        None if n_e > 0 => {
+            linear::solve(ctx, train, n_e, effect).map(|f| linear::deltas(ctx, n_e, &f.x, effect))
+        }
+        None => None,
+    };
+    let table = (n_g > 0).then(|| ctx.nuisance());
+    let cols = |i: usize, c: &mut Columns| {
+        effect(i, c);
+        if let Some(t) = &table {
+            c[n_e..n].copy_from_slice(&t.cols[i]);
+        }
+    };
+    // Residual with the offset taken out: solve on a shifted context copy of r.
+    let fit = match offset {
+        Some(o) => {
+            let mut shifted = ctx.clone();
+            for (row, d) in shifted.rows.iter_mut().zip(o) {
+                for k in 0..3 {
+                    row.r[k] -= d[k];
+                }
+            }
+            linear::solve_with_prior(&shifted, train, n, &cols, Some(&prior))?
+        }
+        None => linear::solve_with_prior(ctx, train, n, &cols, Some(&prior))?,
+    };
+    let mut delta = linear::deltas(ctx, n, &fit.x, &cols);
+    if let Some(o) = offset {
+        for (d, oo) in delta.iter_mut().zip(o) {
+            for k in 0..3 {
+                d[k] += oo[k];
+            }
+        }
+    }
+    Some((fit, delta, alone))
+}
+
+/// Applies the nuisance part (after `n_e` effect parameters) of a joint fit to a config.
+pub(crate) fn nuisance_change(nui: Nuisance, x: Vec<f64>, n_e: usize) -> impl Fn(&mut RobotConfig) {
+    move |c: &mut RobotConfig| {
+        if x.len() > n_e {
+            nui.apply(&x[n_e..], c)
+        }
+    }
+}

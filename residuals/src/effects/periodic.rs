@@ -1,0 +1,207 @@
+//! `periodic`: periodic transmission error of one motor. Its output lags it by
+//! `A sin(2 pi q / P + phase)` (`[[effects.periodic]]`, one entry per term); the drive commands
+//! the motor where its output reaches the target. Tried again after it is added (another term).
+
+use super::joint_fit::{fit_joint, nuisance_change};
+use super::profile::search_rows;
+use super::{lerp, Effect, Parameter};
+use crate::context::Context;
+use crate::extension::Extension;
+use crate::fitted::{Estimate, Fitted};
+use crate::linear::{motor_delta, Columns};
+use pcr_robot::effects::{self as robot, Effects};
+use pcr_robot::RobotConfig;
+
+/// Fewest periods the data must cover on a motor's travel for a period to be scanned: a
+/// "periodic" error that repeats fewer times over the positions the motor took is a smooth
+/// function of that position, which a tendon map that the families cannot quite follow
+/// imitates as well (on `../shared/data/foreign-f0`, a clean robot, periods of 256 to 320 steps
+/// over a travel of 720 steps were named before this rule); the calibration and the
+/// `tendon_map` recalibration cover those.
+pub const MIN_CYCLES: f64 = 3.0;
+
+/// The `periodic` candidate.
+#[derive(Debug)]
+pub struct Periodic;
+
+/// Periodic transmission errors on motor outputs (steps, one entry per row), in place.
+pub fn apply(q: &mut [[f64; 3]], periodic: &[robot::Periodic]) {
+    for p in periodic {
+        let i = (p.motor as usize).clamp(1, 3) - 1;
+        let ph = p.phase_deg.to_radians();
+        for v in q.iter_mut() {
+            v[i] -= p.amplitude_steps * (std::f64::consts::TAU * v[i] / p.period_steps + ph).sin();
+        }
+    }
+}
+
+impl Extension for Periodic {
+    /// Every declared term.
+    fn transmission(&self, effects: &Effects, q: &mut [[f64; 3]]) {
+        apply(q, &effects.periodic);
+    }
+}
+
+impl Effect for Periodic {
+    fn name(&self) -> &'static str {
+        "periodic"
+    }
+
+    fn description(&self) -> &'static str {
+        "periodic transmission error: the output of one motor lags it periodically in its position"
+    }
+
+    /// Fitted once: its motor and period are scanned from scratch.
+    fn iterable(&self) -> bool {
+        false
+    }
+
+    /// Every acceptance adds a term.
+    fn repeatable(&self) -> bool {
+        true
+    }
+
+    /// The output of one motor lags it by A sin(2 pi q / P + phase): every motor and every
+    /// period from 4 steps to a revolution that repeats at least [`MIN_CYCLES`] times over the
+    /// motor's travel in the data is scanned, the best pair is fitted.
+    fn fit(&self, ctx: &Context, train: &[usize]) -> Option<Fitted> {
+        let spr = ctx.model.config.legs[0].actuation.steps_per_rev as f64;
+        let mut periods: Vec<f64> = (4..=256).map(f64::from).collect();
+        let mut p = 272.0;
+        while p <= spr {
+            periods.push(p);
+            p += 16.0;
+        }
+        // Precompute each train row's motor column (d weighted pose / d q_m) dotted with r and
+        // with itself, then scan.
+        let mut best: Option<(f64, usize, f64)> = None; // (sse reduction, motor, period)
+        for m in 0..3 {
+            let (lo, hi) = train
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |a, &i| {
+                    let q = ctx.pred(&ctx.rows[i]).q_eff[m];
+                    (a.0.min(q), a.1.max(q))
+                });
+            let longest = (hi - lo) / MIN_CYCLES;
+            let rows: Vec<([f64; 3], [f64; 3], f64)> = search_rows(train)
+                .iter()
+                .map(|&i| {
+                    let mut dq = [0.0; 3];
+                    dq[m] = 1.0;
+                    let c = motor_delta(ctx, i, dq);
+                    let row = &ctx.rows[i];
+                    (c, row.r, ctx.pred(row).q_eff[m])
+                })
+                .collect();
+            for &per in periods.iter().filter(|p| **p <= longest) {
+                let w = std::f64::consts::TAU / per;
+                let (mut ss, mut sc, mut cc, mut rs, mut rc) = (0.0, 0.0, 0.0, 0.0, 0.0);
+                for (c, r, q) in &rows {
+                    let (sn, cs) = (w * q).sin_cos();
+                    let cr = c[0] * r[0] + c[1] * r[1] + c[2] * r[2];
+                    let c2 = c[0] * c[0] + c[1] * c[1] + c[2] * c[2];
+                    ss += c2 * sn * sn;
+                    sc += c2 * sn * cs;
+                    cc += c2 * cs * cs;
+                    rs += cr * sn;
+                    rc += cr * cs;
+                }
+                let det = ss * cc - sc * sc;
+                if det <= 0.0 {
+                    continue;
+                }
+                let a = (cc * rs - sc * rc) / det;
+                let b = (ss * rc - sc * rs) / det;
+                let red = a * rs + b * rc;
+                if best.is_none_or(|x| red > x.0) {
+                    best = Some((red, m, per));
+                }
+            }
+        }
+        let (_, m, per) = best?;
+        let w = std::f64::consts::TAU / per;
+        let effect = |i: usize, c: &mut Columns| {
+            let q = ctx.pred(&ctx.rows[i]).q_eff[m];
+            let mut dq = [0.0; 3];
+            dq[m] = 1.0;
+            let col = motor_delta(ctx, i, dq);
+            let (sn, cs) = (w * q).sin_cos();
+            c[0] = col.map(|v| v * sn);
+            c[1] = col.map(|v| v * cs);
+        };
+        let nui = ctx.nuisance().nui.clone();
+        let (fit, delta, alone) = fit_joint(ctx, &nui, train, 2, &effect, None)?;
+        // Output = q - A sin(w q + phase): the residual change is -A(sin cos(ph) + cos sin(ph)).
+        let (a_s, a_c) = (-fit.x[0], -fit.x[1]);
+        let amp = a_s.hypot(a_c);
+        let phase = a_c.atan2(a_s);
+        let amp_std = (fit.std[0].hypot(fit.std[1])) / 2f64.sqrt();
+        let nuis = nuisance_change(nui, fit.x.clone(), 2);
+        let entry = robot::Periodic {
+            motor: (m + 1) as u8,
+            period_steps: per,
+            amplitude_steps: amp,
+            phase_deg: phase.to_degrees(),
+        };
+        Some(Fitted {
+            name: self.name(),
+            params: vec![
+                Estimate::new("motor", (m + 1) as f64, None, ""),
+                Estimate::new("period", per, None, "steps"),
+                Estimate::new("amplitude", amp, Some(amp_std), "steps"),
+                Estimate::new(
+                    "phase",
+                    phase.to_degrees(),
+                    Some((amp_std / amp.max(1e-12)).to_degrees()),
+                    "deg",
+                ),
+            ],
+            k: 4,
+            delta,
+            alone,
+            train_sse: fit.sse,
+            change: Box::new(move |c| {
+                c.effects.periodic.push(entry.clone());
+                nuis(c);
+            }),
+        })
+    }
+
+    fn file_position(&self) -> u8 {
+        8
+    }
+
+    /// The amplitude (steps) and the phase (deg) of every term.
+    fn parameters(&self, effects: &Effects) -> Vec<Parameter> {
+        let mut v = Vec::new();
+        for k in 0..effects.periodic.len() {
+            v.push(Parameter {
+                get: |e, k| e.periodic[k].amplitude_steps,
+                set: |e, k, x| e.periodic[k].amplitude_steps = x,
+                index: k,
+                lo: -50.0,
+                hi: 50.0,
+            });
+            v.push(Parameter {
+                get: |e, k| e.periodic[k].phase_deg,
+                set: |e, k, x| e.periodic[k].phase_deg = x,
+                index: k,
+                lo: -720.0,
+                hi: 720.0,
+            });
+        }
+        v
+    }
+
+    /// The amplitudes, when `new` has at least the terms of `old` (a term absent from `old`
+    /// counting as zero).
+    fn blend(&self, old: &RobotConfig, new: &mut RobotConfig, s: f64) {
+        let eo = &old.effects;
+        if eo.periodic.len() <= new.effects.periodic.len() {
+            for (k, p) in new.effects.periodic.iter_mut().enumerate() {
+                let a0 = eo.periodic.get(k).map_or(0.0, |x| x.amplitude_steps);
+                p.amplitude_steps = lerp(a0, p.amplitude_steps, s);
+            }
+        }
+    }
+}

@@ -1,0 +1,173 @@
+//! The calibration parameters (the paper's step-1 and step-2 sets: per leg psi, l_C, the map
+//! coefficients, r_p, theta_p) as nuisance columns: every candidate is fitted together with
+//! them, so that an effect the calibration partly absorbed is estimated whole and no effect
+//! gets the credit for a plain recalibration.
+
+use crate::model::Prediction;
+use pcr_kinematics::{Leg, Robot, TendonMap};
+use pcr_robot::{geometry as g, RobotConfig, Vec2};
+
+/// The calibration parameters (the paper's step-1 and step-2 sets) as nuisance columns:
+/// per leg psi (deg), l_C (mm), the map coefficients, r_p (mm), theta_p (deg).
+#[derive(Debug, Clone)]
+pub struct Nuisance {
+    cfg: Vec<pcr_robot::LegConfig>,
+    /// Per leg: the leg as it is and perturbed in each geometric parameter, with P_i^E.
+    legs: Vec<[(Leg, Vec2); 1 + GEO.len()]>,
+    n_map: [usize; 3],
+    /// Number of columns.
+    pub n: usize,
+    names: Vec<String>,
+}
+
+const GEO: [&str; 4] = ["psi_deg", "l_c_mm", "r_p_mm", "theta_p_deg"];
+/// Finite-difference step of the geometric parameters (deg or mm).
+const GEO_STEP: f64 = 1e-4;
+
+impl Nuisance {
+    /// The nuisance set of a robot file.
+    pub fn of(config: &RobotConfig) -> Nuisance {
+        let cfg = config.legs.clone();
+        let n_map: [usize; 3] = std::array::from_fn(|i| cfg[i].tendon_map.form().n_coeffs());
+        let legs = cfg
+            .iter()
+            .map(|c| {
+                std::array::from_fn(|k| {
+                    let mut p = c.clone();
+                    match k {
+                        1 => p.psi_deg += GEO_STEP,
+                        2 => p.l_c_mm += GEO_STEP,
+                        3 => p.r_p_mm += GEO_STEP,
+                        4 => p.theta_p_deg += GEO_STEP,
+                        _ => {}
+                    }
+                    (Leg::from_config(&p), p.platform_point())
+                })
+            })
+            .collect();
+        let mut names = Vec::new();
+        for i in 0..3 {
+            for gname in GEO {
+                names.push(format!("{gname}[{}]", i + 1));
+            }
+            let form = cfg[i].tendon_map.form();
+            for j in 0..n_map[i] {
+                names.push(format!("{}[{}]", form.coeff_name(j), i + 1));
+            }
+        }
+        Nuisance {
+            legs,
+            n: names.len(),
+            names,
+            cfg,
+            n_map,
+        }
+    }
+
+    /// Column names.
+    pub fn names(&self) -> &[String] {
+        &self.names
+    }
+
+    /// Offset of leg i's columns.
+    fn offset(&self, i: usize) -> usize {
+        (0..i).map(|l| GEO.len() + self.n_map[l]).sum()
+    }
+
+    /// The columns of a row predicted as `p` by the constant-curvature model `robot` (the
+    /// change of its weighted pose per unit parameter; phi weighted by `w_phi`, mm/rad), written
+    /// to the first [`Nuisance::n`] entries of `out`.
+    pub fn columns(&self, robot: &Robot, p: &Prediction, w_phi: f64, out: &mut [[f64; 3]]) {
+        for c in out.iter_mut().take(self.n) {
+            *c = [0.0; 3];
+        }
+        let Some(pose) = p.pose else {
+            return;
+        };
+        let x = pcr_kinematics::Pose::new(pose[0], pose[1], pose[2]);
+        let a = robot.jacobian_a(&x, &p.kappa);
+        let Some(ainv) = a.try_inverse() else {
+            return;
+        };
+        let mut basis = [0.0; 13];
+        for leg in 0..3 {
+            let off = self.offset(leg);
+            // dh_leg/d param by finite differences of the constraint alone.
+            let h = |k: usize| {
+                let (l, pe) = &self.legs[leg][k];
+                let m = l.joint_m(p.kappa[leg]);
+                let pe = g::rot(x.phi, *pe);
+                let d = g::sub(g::add([x.x, x.y], pe), m);
+                g::dot(d, d) - l.l_st * l.l_st
+            };
+            let h0 = h(0);
+            for gk in 0..GEO.len() {
+                // l_C changes the segment at a fixed curvature (theta = kappa l_C).
+                let dh = (h(gk + 1) - h0) / GEO_STEP;
+                out[off + gk] = [
+                    -ainv[(0, leg)] * dh,
+                    -ainv[(1, leg)] * dh,
+                    -ainv[(2, leg)] * dh * w_phi,
+                ];
+            }
+            // Map coefficients: d pose / d kappa_leg * basis_j(dl).
+            let form = self.cfg[leg].tendon_map.form();
+            TendonMap::flat_basis(form, p.dl_eff[leg], &mut basis);
+            for j in 0..self.n_map[leg] {
+                let b = basis[j];
+                out[off + GEO.len() + j] = [
+                    p.j_kappa[(0, leg)] * b,
+                    p.j_kappa[(1, leg)] * b,
+                    p.j_kappa[(2, leg)] * b * w_phi,
+                ];
+            }
+        }
+    }
+
+    /// The prior of the nuisance parameters (1 / sigma^2, column order): the calibration has
+    /// placed them, so one step moves the geometry by about a millimetre or a degree and a map
+    /// coefficient by about 5 % of its value.
+    pub fn prior(&self) -> Vec<f64> {
+        let mut p = Vec::with_capacity(self.n);
+        for leg in 0..3 {
+            p.extend([1.0; GEO.len()]);
+            let coeffs = self.cfg[leg].tendon_map.flat_coeffs();
+            for j in 0..self.n_map[leg] {
+                let c = coeffs.get(j).copied().unwrap_or(1e-3).abs().max(1e-6);
+                p.push(1.0 / (0.05 * c).powi(2));
+            }
+        }
+        p
+    }
+
+    /// Applies parameter changes `dx` (in column order) to a robot configuration's legs.
+    pub fn apply(&self, dx: &[f64], cfg: &mut RobotConfig) {
+        for leg in 0..3 {
+            let off = self.offset(leg);
+            let l = &mut cfg.legs[leg];
+            l.psi_deg += dx[off];
+            l.l_c_mm += dx[off + 1];
+            l.r_p_mm += dx[off + 2];
+            l.theta_p_deg += dx[off + 3];
+            if l.tendon_map.coeffs.is_empty() {
+                // The nominal linear map written out: k0 = 1 / (a l_C) of the old length.
+                l.tendon_map.coeffs =
+                    vec![1.0 / (l.actuation.tendon_offset_mm * self.cfg[leg].l_c_mm)];
+            }
+            let mut flat = l.tendon_map.flat_coeffs();
+            for j in 0..self.n_map[leg] {
+                flat[j] += dx[off + GEO.len() + j];
+            }
+            l.tendon_map = pcr_robot::TendonMapSpec::from_flat(l.tendon_map.form(), &flat);
+        }
+    }
+}
+
+/// The nuisance parameters and their columns for every row of a context.
+#[derive(Debug)]
+pub struct NuisanceTable {
+    /// The parameters.
+    pub nui: Nuisance,
+    /// Columns per row (the context's rows, in order).
+    pub cols: Vec<Vec<[f64; 3]>>,
+}
