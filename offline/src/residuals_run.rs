@@ -24,10 +24,10 @@ pub fn check_options(block_s: f64, alpha: f64, candidates: &[String]) -> Result<
         )));
     }
     for c in candidates {
-        if !pcr_residuals::candidates::NAMES.contains(&c.as_str()) {
+        if pcr_residuals::effects::named(c).is_none() {
             return Err(OfflineError::invalid(format!(
                 "unknown effect `{c}` (known: {})",
-                pcr_residuals::candidates::NAMES.join(", ")
+                pcr_residuals::effects::names().join(", ")
             )));
         }
     }
