@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Installs everything the stack and its tests need on a fresh Debian machine:
 # the AVR toolchain and simavr (firmware tests), and a Python venv with the reference
-# implementations used by the comparison tests (ruckig). Safe to run repeatedly.
+# implementations used by the comparison tests (ruckig) and what the Python package needs to be
+# built, tested and its notebook executed (maturin, pandas, pytest, nbclient, ...;
+# scripts/check_python.sh installs the package itself). Safe to run repeatedly.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 

@@ -5,12 +5,12 @@
 //! - `pcr calibrate --robot R --data rec.csv --out calibrated.toml --report DIR --json out.json`
 //! - `pcr calibrate leg --data leg.csv --l-c-mm L [--l-ce-mm E] --json out.json`
 
-use crate::clock::utc_now;
 use anyhow::{bail, Context};
 use pcr_calibration::calibrate::{self, Calibration, Method, Options, ParameterSet, Readings};
 use pcr_calibration::report::{opt, write_report};
 use pcr_calibration::segment::{self, SegmentOptions};
 use pcr_calibration::StaticData;
+use pcr_offline::clock::utc_now;
 use pcr_recording::Recording;
 use pcr_robot::{MapReading, RobotConfig, TendonMapKind};
 use std::path::{Path, PathBuf};

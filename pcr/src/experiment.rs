@@ -11,14 +11,14 @@
 //! - `pcr experiment design calibration [--robot R] --out poses.csv [--svg fig5.svg]`: the pose
 //!   set and its figure.
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use pcr_experiments::{
     calibration_set_svg, run_in_process, BacklashDesign, BacklashOptions, CalibrationOptions,
-    CalibrationSet, Design, PathsDesign, RunSetup, StaticDesign, Tolerances, VisitTiming,
+    CalibrationSet, Design, PathsDesign, StaticDesign, VisitTiming,
 };
 use pcr_kinematics::Robot;
-use pcr_plant::PlantConfig;
+use pcr_offline::experiment_run;
 use pcr_robot::RobotConfig;
 use std::path::{Path, PathBuf};
 
@@ -215,7 +215,7 @@ struct BacklashArgs {
 pub fn run(args: Args) -> Result<()> {
     match args.command {
         ExperimentCommand::Calibration { run, set, visit } => {
-            let src = Sources::load(&run)?;
+            let src = load_sources(&run)?;
             let design = StaticDesign::calibration(
                 &src.model_robot()?,
                 &set.options(run.seed),
@@ -231,7 +231,7 @@ pub fn run(args: Args) -> Result<()> {
             reps,
             phi_deg,
         } => {
-            let src = Sources::load(&run)?;
+            let src = load_sources(&run)?;
             let design = StaticDesign::repeatability(
                 &src.model_robot()?,
                 &set.options(run.seed),
@@ -243,11 +243,11 @@ pub fn run(args: Args) -> Result<()> {
             execute(Design::Static(design), &run, src)
         }
         ExperimentCommand::Paths { run } => {
-            let src = Sources::load(&run)?;
+            let src = load_sources(&run)?;
             execute(Design::Paths(PathsDesign::default()), &run, src)
         }
         ExperimentCommand::Backlash { run, backlash: b } => {
-            let src = Sources::load(&run)?;
+            let src = load_sources(&run)?;
             let design = BacklashDesign::new(
                 &src.model_robot()?,
                 &BacklashOptions {
@@ -276,165 +276,15 @@ pub fn run(args: Args) -> Result<()> {
     }
 }
 
-/// The robot model, the plant's robot and the plant of a run, with their names for the
-/// metadata.
-#[derive(Clone)]
-pub(crate) struct Sources {
-    model: RobotConfig,
-    model_name: String,
-    plant_robot: RobotConfig,
-    plant_robot_name: String,
-    plant: PlantConfig,
-    plant_name: String,
-    /// The configuration's `[capture] latency_ms`, s.
-    capture_latency_s: Option<f64>,
-}
+pub(crate) use pcr_offline::experiment_run::Sources;
 
-impl Sources {
-    fn load(run: &RunArgs) -> Result<Sources> {
-        Sources::from_files(
-            &run.config,
-            run.robot.as_deref(),
-            run.plant.as_deref(),
-            run.plant_seed,
-        )
-    }
-
-    /// The sources of a supervisor configuration, with optional replacements of the model and
-    /// the plant (see `pcr experiment --help`).
-    pub(crate) fn from_files(
-        config: &Path,
-        robot: Option<&Path>,
-        plant: Option<&Path>,
-        plant_seed: Option<u64>,
-    ) -> Result<Sources> {
-        let cfg_name = config.display().to_string();
-        let text = std::fs::read_to_string(config)
-            .with_context(|| format!("--config {cfg_name}: cannot read the file"))?;
-        let table: toml::Table = toml::from_str(&text)
-            .with_context(|| format!("--config {cfg_name}: not a valid TOML file"))?;
-        // The supervisor's default robot and its resolution: relative to the working directory.
-        let robot_path = match table.get("robot") {
-            None => "configs/robot.toml".to_string(),
-            Some(toml::Value::String(s)) => s.clone(),
-            Some(_) => bail!("--config {cfg_name}: key `robot` must be a file name"),
-        };
-        let plant_robot = RobotConfig::load(&robot_path)
-            .with_context(|| format!("--config {cfg_name}: robot = {robot_path:?}"))?;
-        let (model, model_name) = match robot {
-            Some(p) => (
-                RobotConfig::load(p).with_context(|| format!("--robot {}", p.display()))?,
-                p.display().to_string(),
-            ),
-            None => (plant_robot.clone(), robot_path.clone()),
-        };
-        let (mut plant, plant_name) = match plant {
-            Some(p) => (
-                PlantConfig::load(p).with_context(|| format!("--plant {}", p.display()))?,
-                p.display().to_string(),
-            ),
-            None => plant_of_config(&table, &cfg_name)?,
-        };
-        if let Some(s) = plant_seed {
-            plant.seed = s;
-        }
-        let capture_latency_s = match table.get("capture").and_then(|c| c.get("latency_ms")) {
-            None => None,
-            Some(v) => match v.as_float().or_else(|| v.as_integer().map(|i| i as f64)) {
-                Some(ms) if ms.is_finite() && (0.0..=1000.0).contains(&ms) => Some(ms * 1e-3),
-                _ => bail!(
-                    "--config {cfg_name}: [capture] latency_ms = {v}: must be a number of \
-                     milliseconds in 0..=1000"
-                ),
-            },
-        };
-        Ok(Sources {
-            model,
-            model_name,
-            plant_robot,
-            plant_robot_name: robot_path,
-            plant,
-            plant_name,
-            capture_latency_s,
-        })
-    }
-
-    pub(crate) fn model_robot(&self) -> Result<Robot> {
-        Robot::new(&self.model).with_context(|| format!("robot model {}", self.model_name))
-    }
-
-    /// The same plant driven by another model.
-    pub(crate) fn with_model(&self, model: RobotConfig, name: String) -> Sources {
-        Sources {
-            model,
-            model_name: name,
-            ..self.clone()
-        }
-    }
-
-    /// The plant's own robot (the configuration's `robot`).
-    pub(crate) fn plant_robot(&self) -> &RobotConfig {
-        &self.plant_robot
-    }
-}
-
-/// The plant of the supervisor configuration's driver process.
-fn plant_of_config(table: &toml::Table, cfg: &str) -> Result<(PlantConfig, String)> {
-    let procs = match table.get("process") {
-        Some(toml::Value::Array(a)) => a.as_slice(),
-        None => &[],
-        Some(_) => bail!("--config {cfg}: `process` must be an array of tables ([[process]])"),
-    };
-    let driver = procs.iter().enumerate().find(|(_, p)| {
-        p.get("name")
-            .and_then(toml::Value::as_str)
-            .is_some_and(|n| n == "driver")
-    });
-    let Some((i, driver)) = driver else {
-        bail!("--config {cfg}: no driver process, so no plant: give --plant P");
-    };
-    let backend = driver
-        .get("backend")
-        .and_then(toml::Value::as_str)
-        .unwrap_or("sim");
-    match backend {
-        "plant" | "fil" => match driver.get("plant") {
-            None => Ok((
-                PlantConfig::prototype(),
-                "prototype (built-in; the config's driver names no plant)".into(),
-            )),
-            Some(toml::Value::String(p)) => Ok((
-                PlantConfig::load(p)
-                    .with_context(|| format!("--config {cfg}: process[{i}].plant"))?,
-                p.clone(),
-            )),
-            Some(_) => bail!("--config {cfg}: process[{i}].plant must be a file name"),
-        },
-        "sim" => Ok((
-            PlantConfig::ideal(),
-            "ideal (built-in; the config's driver uses the ideal sim backend)".into(),
-        )),
-        "serial" => bail!(
-            "--config {cfg}: the driver uses the serial backend (the real robot); the \
-             in-process runner needs a simulated plant: give --plant P"
-        ),
-        other => bail!("--config {cfg}: process[{i}].backend = {other:?} is not a known backend"),
-    }
-}
-
-/// `created`: `SOURCE_DATE_EPOCH` (seconds) when set, so that runs can be byte-identical, else
-/// now.
-fn created() -> Result<String> {
-    match std::env::var("SOURCE_DATE_EPOCH") {
-        Ok(s) => {
-            let secs: i64 = s
-                .trim()
-                .parse()
-                .with_context(|| format!("SOURCE_DATE_EPOCH = {s:?} is not a number of seconds"))?;
-            Ok(crate::clock::utc_of(secs))
-        }
-        Err(_) => Ok(crate::clock::utc_now()),
-    }
+fn load_sources(run: &RunArgs) -> Result<Sources> {
+    Ok(Sources::from_files(
+        &run.config,
+        run.robot.as_deref(),
+        run.plant.as_deref(),
+        run.plant_seed,
+    )?)
 }
 
 fn execute(design: Design, run: &RunArgs, src: Sources) -> Result<()> {
@@ -450,28 +300,12 @@ pub(crate) fn record(
     out: &Path,
 ) -> Result<pcr_experiments::RunSummary> {
     let kind = design.kind();
-    let setup = RunSetup {
-        model: src.model,
-        plant_robot: src.plant_robot,
-        plant: src.plant,
-        period_s: 0.02,
+    let setup = experiment_run::setup(
+        &design,
+        src,
         seed,
-        metadata: vec![
-            ("robot".into(), src.model_name),
-            ("plant".into(), src.plant_name),
-            ("plant_robot".into(), src.plant_robot_name),
-            (
-                "source".into(),
-                format!(
-                    "pcr experiment {kind} (in-process chain on the simulated plant, pcr {})",
-                    env!("CARGO_PKG_VERSION")
-                ),
-            ),
-            ("created".into(), created()?),
-        ],
-        tolerances: Tolerances::default(),
-        capture_latency_s: src.capture_latency_s,
-    };
+        concat!("pcr ", env!("CARGO_PKG_VERSION")),
+    )?;
     let out_name = out.display().to_string();
     if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir)

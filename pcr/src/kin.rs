@@ -7,6 +7,7 @@ use clap::{Args, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use pcr_kinematics::workspace::{self, Workspace};
 use pcr_kinematics::{Pose, Robot};
+use pcr_offline::kinematics_rows::{fk_row, ik_row, kappa_of_steps};
 use pcr_robot::RobotConfig;
 
 fn load_robot(path: &Option<String>) -> Result<Robot> {
@@ -76,37 +77,18 @@ pub fn run_ik(a: IkArgs) -> Result<()> {
             number(&rec, cp, "phi_deg", &a.input)?,
         );
         vals.clear();
-        match robot.ik(&pose) {
-            Ok(s) => {
-                let mut dl = [0.0; 3];
-                let mut status = if robot.conditioning(&pose, &s.kappa).value()
-                    < robot.limits.singularity_threshold
-                {
-                    "singular"
-                } else {
-                    "ok"
-                };
-                for i in 0..3 {
-                    match robot.legs[i].map.dl_for_kappa(s.kappa[i]) {
-                        Ok(d) => dl[i] = d,
-                        Err(_) => status = "bending_limit",
-                    }
-                }
-                vals.extend(s.kappa.iter().map(|k| fmt(*k)));
-                vals.extend(dl.iter().map(|d| fmt(*d)));
-                vals.extend(
-                    (0..3)
-                        .map(|i| format!("{}", (dl[i] / robot.legs[i].mm_per_step).round() as i64)),
-                );
-                vals.extend(s.gamma.iter().map(|g| fmt(g.to_degrees())));
-                vals.extend(s.zeta.iter().map(|z| fmt(z.to_degrees())));
-                vals.push(status.into());
+        let r = ik_row(&robot, &pose);
+        match r.values {
+            Some(v) => {
+                vals.extend(v.kappa_per_mm.iter().map(|k| fmt(*k)));
+                vals.extend(v.dl_mm.iter().map(|d| fmt(*d)));
+                vals.extend(v.steps.iter().map(|q| q.to_string()));
+                vals.extend(v.gamma_rad.iter().map(|g| fmt(g.to_degrees())));
+                vals.extend(v.zeta_rad.iter().map(|z| fmt(z.to_degrees())));
             }
-            Err(e) => {
-                vals.extend(std::iter::repeat_n(String::new(), 15));
-                vals.push(e.status().into());
-            }
+            None => vals.extend(std::iter::repeat_n(String::new(), 15)),
         }
+        vals.push(r.status.into());
         layout.fill(&mut row, &rec, vals.drain(..));
         w.write_record(&row)?;
         pb.inc(1);
@@ -177,32 +159,11 @@ pub fn run_fk(a: FkArgs) -> Result<()> {
         for i in 0..3 {
             v[i] = number(&rec, cols[i], &names[i], &a.input)?;
         }
-        let kappa = if steps {
-            std::array::from_fn(|i| robot.steps_to_kappa(i, v[i]))
-        } else {
-            v
-        };
-        let vals: [String; 4] = match robot.fk(&kappa) {
-            Ok(p) => {
-                // The loops close; report a limit that is violated there, or a singularity.
-                let status = match robot.ik(&p) {
-                    Err(e) => e.status(),
-                    Ok(_)
-                        if robot.conditioning(&p, &kappa).value()
-                            < robot.limits.singularity_threshold =>
-                    {
-                        "singular"
-                    }
-                    Ok(_) => "ok",
-                };
-                [fmt(p.x), fmt(p.y), fmt(p.phi_deg()), status.into()]
-            }
-            Err(e) => [
-                String::new(),
-                String::new(),
-                String::new(),
-                e.status().into(),
-            ],
+        let kappa = if steps { kappa_of_steps(&robot, &v) } else { v };
+        let r = fk_row(&robot, &kappa);
+        let vals: [String; 4] = match r.pose {
+            Some(p) => [fmt(p.x), fmt(p.y), fmt(p.phi_deg()), r.status.into()],
+            None => [String::new(), String::new(), String::new(), r.status.into()],
         };
         layout.fill(&mut row, &rec, vals);
         w.write_record(&row)?;

@@ -110,7 +110,7 @@ pub fn run(a: Args) -> Result<()> {
         .with_context(|| format!("--out {}: cannot create the folder", dir.display()))?;
     let wall = std::time::Instant::now();
     let nominal = Sources::from_files(&a.config, None, a.plant.as_deref(), None)?;
-    let start = nominal.plant_robot().clone();
+    let start = nominal.plant_robot.clone();
     let model = nominal.model_robot()?;
     let cal_options = CalibrationOptions {
         points: a.points as usize,
@@ -178,7 +178,7 @@ pub fn run(a: Args) -> Result<()> {
     )?;
     let cal =
         calibrate::calibrate_data(&start, &sd, &CalOptions::default()).context("calibration")?;
-    let created = crate::clock::utc_now();
+    let created = pcr_offline::clock::utc_now();
     let calibrated_path = file("calibrated.toml");
     std::fs::write(&calibrated_path, calibrate::robot_file(&cal, &created))
         .with_context(|| format!("cannot write {}", calibrated_path.display()))?;
@@ -216,7 +216,7 @@ pub fn run(a: Args) -> Result<()> {
     let extended_path = file("extended.toml");
     std::fs::write(
         &extended_path,
-        crate::residuals::extended_file(&res, &crate::clock::utc_now()),
+        crate::residuals::extended_file(&res, &pcr_offline::clock::utc_now()),
     )
     .with_context(|| format!("cannot write {}", extended_path.display()))?;
     std::fs::write(file("residuals.json"), serde_json::to_string_pretty(&res)?)

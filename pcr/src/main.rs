@@ -5,7 +5,6 @@
 use clap::{Parser, Subcommand};
 
 mod calibrate;
-mod clock;
 mod convert;
 mod csvio;
 mod evaluate;

@@ -23,16 +23,13 @@
 //! kinematics. `pcr plan joint --steps a,b,c` is a single joint move.
 
 use crate::csvio::fmt;
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{bail, Context, Result};
 use clap::{Args as ClapArgs, Subcommand};
-use pcr_control::{
-    circle_program, moves_of_program, plan_moves, square_program, CommandError, MotionLimits, Move,
-    PlanError, PlannedCycle, PlannerSource, CYCLE_S,
-};
-use pcr_kinematics::{CheckOptions, Pose, Robot};
+use pcr_control::CYCLE_S;
+use pcr_kinematics::{Pose, Robot};
+#[cfg(test)]
 use pcr_messages::command_kind;
-use pcr_planner::program::{self, JointSettings, PathLimits};
-use std::f64::consts::TAU;
+use pcr_offline::plan_request::{self, PlanRow, PlanSettings, Shape as ReqShape};
 
 /// Arguments of `pcr plan`.
 #[derive(ClapArgs)]
@@ -184,9 +181,9 @@ enum Shape {
 }
 
 /// Default motor acceleration of joint moves, steps/s^2.
-const DEFAULT_JOINT_AMAX: f64 = 2000.0;
+const DEFAULT_JOINT_AMAX: f64 = plan_request::DEFAULT_JOINT_AMAX;
 /// Default motor jerk of joint moves, steps/s^3.
-const DEFAULT_JOINT_JMAX: f64 = 20000.0;
+const DEFAULT_JOINT_JMAX: f64 = plan_request::DEFAULT_JOINT_JMAX;
 
 fn parse_pose(s: &str, what: &str) -> Result<Pose> {
     let v: Vec<f64> = s
@@ -200,40 +197,6 @@ fn parse_pose(s: &str, what: &str) -> Result<Pose> {
     Ok(Pose::new(v[0], v[1], v[2].to_radians()))
 }
 
-/// The chain's program of a `pcr plan` command.
-pub struct PlanProgram {
-    /// The moves.
-    pub moves: Vec<Move>,
-    /// A name of each move, for messages.
-    pub names: Vec<String>,
-    /// The start pose.
-    pub start: Pose,
-    /// The program file (prefix of messages), if any.
-    pub file: Option<String>,
-}
-
-impl PlanProgram {
-    fn push(&mut self, name: impl Into<String>, m: Move) {
-        self.names.push(name.into());
-        self.moves.push(m);
-    }
-
-    fn extend(&mut self, moves: Vec<Move>, names: &[&str]) {
-        debug_assert_eq!(moves.len(), names.len());
-        for (m, n) in moves.into_iter().zip(names) {
-            self.push(*n, m);
-        }
-    }
-}
-
-/// Largest coordinate difference of two poses (mm, rad).
-fn max_diff(a: &Pose, b: &Pose) -> f64 {
-    (a.x - b.x)
-        .abs()
-        .max((a.y - b.y).abs())
-        .max((a.phi - b.phi).abs())
-}
-
 fn positive(v: f64, what: &str, unit: &str) -> Result<()> {
     if !(v.is_finite() && v > 0.0) {
         bail!("{what} must be > 0 {unit}, got {v}");
@@ -241,38 +204,10 @@ fn positive(v: f64, what: &str, unit: &str) -> Result<()> {
     Ok(())
 }
 
-const CIRCLE_NAMES: [&str; 4] = ["dwell", "circle", "dwell", "return"];
-
-fn square_names() -> Vec<&'static str> {
-    let mut n = vec!["dwell", "approach to square", "dwell"];
-    for s in [
-        "square side 1",
-        "square side 2",
-        "square side 3",
-        "square side 4",
-    ] {
-        n.extend([s, "dwell"]);
-    }
-    n.push("return");
-    n
-}
-
-/// The chain's program of `a` (not of `program` and `joint`, which need the files and the robot).
-fn shape_program(a: &Args, from: Pose) -> Result<PlanProgram> {
-    let mut p = PlanProgram {
-        moves: Vec::new(),
-        names: Vec::new(),
-        start: from,
-        file: None,
-    };
-    let path_limits = |speed: f64, blend_radius: f64| PathLimits {
-        speed,
-        acceleration: a.amax,
-        jerk: a.jmax,
-        blend_radius,
-        rotation_radius: pcr_planner::path::DEFAULT_ROTATION_RADIUS_MM,
-    };
-    match &a.shape {
+/// The library's request of `a`, its numbers checked under the options' names.
+fn request(a: &Args) -> Result<(ReqShape, PlanSettings)> {
+    let from = parse_pose(&a.from, "--from")?;
+    let shape = match &a.shape {
         Shape::Circle {
             radius,
             speed,
@@ -284,42 +219,13 @@ fn shape_program(a: &Args, from: Pose) -> Result<PlanProgram> {
         } => {
             positive(*radius, "--radius", "mm")?;
             positive(*speed, "--speed", "mm/s")?;
-            let phi = phi_deg.to_radians();
-            if *start_deg == 0.0 && !cw {
-                p.extend(
-                    circle_program([*cx, *cy], *radius, *speed, phi, from),
-                    &CIRCLE_NAMES,
-                );
-            } else {
-                let th = start_deg.to_radians();
-                let p0 = Pose::new(cx + radius * th.cos(), cy + radius * th.sin(), phi);
-                p.push("dwell", Move::Dwell { duration_s: 0.2 });
-                p.push(
-                    "approach to circle",
-                    Move::Line {
-                        to: p0,
-                        speed_mm_s: *speed,
-                    },
-                );
-                p.push(
-                    "circle",
-                    Move::Arc {
-                        centre: [*cx, *cy],
-                        sweep_rad: if *cw { -TAU } else { TAU },
-                        phi: Some(phi),
-                        speed_mm_s: None,
-                        continues: false,
-                        limits: path_limits(*speed, 0.0),
-                    },
-                );
-                p.push("dwell", Move::Dwell { duration_s: 0.2 });
-                p.push(
-                    "return",
-                    Move::Line {
-                        to: from,
-                        speed_mm_s: *speed,
-                    },
-                );
+            ReqShape::Circle {
+                radius_mm: *radius,
+                speed_mm_s: *speed,
+                centre_mm: [*cx, *cy],
+                phi_deg: *phi_deg,
+                start_deg: *start_deg,
+                cw: *cw,
             }
         }
         Shape::Square {
@@ -332,276 +238,100 @@ fn shape_program(a: &Args, from: Pose) -> Result<PlanProgram> {
         } => {
             positive(*side, "--side", "mm")?;
             positive(*speed, "--speed", "mm/s")?;
-            let phi = phi_deg.to_radians();
-            match blend_radius {
-                None => p.extend(
-                    square_program([*cx, *cy], *side, *speed, phi, from),
-                    &square_names(),
-                ),
-                Some(r) => {
-                    if !(r.is_finite() && *r >= 0.0) {
-                        bail!("--blend-radius must be a radius >= 0 mm, got {r}");
-                    }
-                    // One composite from --from around the square (starting in the middle of
-                    // its lower side) and back.
-                    let h = side / 2.0;
-                    let start = Pose::new(*cx, cy - h, phi);
-                    let mut pts = Vec::new();
-                    if max_diff(&start, &from) > 1e-9 {
-                        pts.push(("approach to square", start));
-                    }
-                    for (name, x, y) in [
-                        ("square side 1", cx + h, cy - h),
-                        ("square side 2", cx + h, cy + h),
-                        ("square side 3", cx - h, cy + h),
-                        ("square side 4", cx - h, cy - h),
-                        ("square side 1", *cx, cy - h),
-                    ] {
-                        pts.push((name, Pose::new(x, y, phi)));
-                    }
-                    if max_diff(&start, &from) > 1e-9 {
-                        pts.push(("return", from));
-                    }
-                    for (k, (name, to)) in pts.into_iter().enumerate() {
-                        p.push(
-                            name,
-                            Move::PathLine {
-                                to: [to.x, to.y],
-                                phi: Some(to.phi),
-                                speed_mm_s: None,
-                                blend_radius_mm: None,
-                                continues: k > 0,
-                                limits: path_limits(*speed, *r),
-                            },
-                        );
-                    }
+            if let Some(r) = blend_radius {
+                if !(r.is_finite() && *r >= 0.0) {
+                    bail!("--blend-radius must be a radius >= 0 mm, got {r}");
                 }
+            }
+            ReqShape::Square {
+                side_mm: *side,
+                speed_mm_s: *speed,
+                centre_mm: [*cx, *cy],
+                phi_deg: *phi_deg,
+                blend_radius_mm: *blend_radius,
             }
         }
         Shape::Line { to, speed } => {
             let to = parse_pose(to, "--to")?;
             positive(*speed, "--speed", "mm/s")?;
-            p.push(
-                "line",
-                Move::Line {
-                    to,
-                    speed_mm_s: *speed,
-                },
-            );
-            if max_diff(&to, &from) > 1e-9 {
-                p.push(
-                    "return",
-                    Move::Line {
-                        to: from,
-                        speed_mm_s: *speed,
-                    },
-                );
+            ReqShape::Line {
+                to,
+                speed_mm_s: *speed,
             }
         }
         Shape::Paper { speed } => {
             positive(*speed, "--speed", "mm/s")?;
-            p.extend(
-                circle_program([0.0, 0.0], 50.0, *speed, 0.0, from),
-                &CIRCLE_NAMES,
-            );
-            p.extend(
-                square_program([0.0, 0.0], 50.0, *speed, 0.0, from),
-                &square_names(),
-            );
+            ReqShape::Paper { speed_mm_s: *speed }
         }
-        Shape::Program { .. } | Shape::Joint { .. } => {
-            bail!("internal: programs and joint moves are built by `build_program`")
-        }
-    }
-    Ok(p)
-}
-
-/// The chain's program of `pcr plan` with these arguments.
-pub fn build_program(a: &Args, robot: &Robot, from: Pose) -> Result<PlanProgram> {
-    match &a.shape {
         Shape::Program {
             file,
             joint_amax,
             joint_jmax,
-        } => {
-            let prog = program::load(
-                file,
-                &program::Defaults {
-                    acceleration: a.amax,
-                    jerk: a.jmax,
-                    joint_acceleration: *joint_amax,
-                    joint_jerk: *joint_jmax,
-                },
-            )?;
-            let moves = moves_of_program(&prog);
-            let names = prog
-                .segments
-                .iter()
-                .enumerate()
-                .map(|(i, s)| format!("segment[{i}] ({})", s.kind()))
-                .collect();
-            Ok(PlanProgram {
-                moves,
-                names,
-                start: from,
-                file: Some(file.clone()),
-            })
-        }
+        } => ReqShape::Program {
+            file: file.clone(),
+            joint_amax: *joint_amax,
+            joint_jmax: *joint_jmax,
+        },
         Shape::Joint {
             steps,
             from_steps,
             joint_amax,
             joint_jmax,
-        } => {
-            let target = parse_steps(steps, "--steps")?;
-            let q0 = match from_steps {
-                Some(s) => parse_steps(s, "--from-steps")?,
-                None => {
-                    let s = robot.ik(&Pose::default())?;
-                    let mut q = [0.0; 3];
-                    for i in 0..3 {
-                        q[i] = robot.kappa_to_steps(i, s.kappa[i])?.round();
-                    }
-                    q
-                }
-            };
-            let kappa = std::array::from_fn(|i| robot.steps_to_kappa(i, q0[i]));
-            let start = robot
-                .fk(&kappa)
-                .with_context(|| format!("start steps {q0:?}: no pose in the working mode"))?;
-            Ok(PlanProgram {
-                moves: vec![Move::Joint {
-                    steps: target.map(|q| q as i64),
-                    limits: JointSettings {
-                        acceleration: *joint_amax,
-                        jerk: *joint_jmax,
-                    },
-                }],
-                names: vec!["joint move".into()],
-                start,
-                file: None,
-            })
-        }
-        _ => shape_program(a, from),
-    }
-}
-
-/// Why the chain refuses the program, naming the move.
-fn refusal(e: CommandError, p: &PlanProgram) -> anyhow::Error {
-    let name = |i: usize| p.names.get(i).map_or("?", |s| s.as_str()).to_string();
-    let file = p.file.as_ref().map_or(String::new(), |f| format!("{f}: "));
-    match e {
-        CommandError::Plan(PlanError::Rejected { index, why }) => {
-            anyhow!("{file}motion rejected in `{}`: {why}", name(index))
-        }
-        CommandError::Plan(PlanError::Invalid { index, why }) => {
-            anyhow!("{file}`{}`: {why}", name(index))
-        }
-        CommandError::Plan(PlanError::InvalidMove { index, what }) => {
-            anyhow!("{file}`{}`: invalid {what}", name(index))
-        }
-        other => anyhow!("{file}{other}"),
-    }
-}
-
-/// The pause, resume and stop requests of `a` as (cycle, command kind), in cycle order.
-fn requests(a: &Args) -> Result<Vec<(usize, u32)>> {
-    let mut r = Vec::new();
-    for (t, kind, what) in [
-        (a.pause_at, command_kind::PAUSE, "--pause-at"),
-        (a.resume_at, command_kind::RESUME, "--resume-at"),
-        (a.stop_at, command_kind::STOP, "--stop-at"),
+        } => ReqShape::Joint {
+            steps: parse_steps(steps, "--steps")?,
+            from_steps: from_steps
+                .as_deref()
+                .map(|s| parse_steps(s, "--from-steps"))
+                .transpose()?,
+            joint_amax: *joint_amax,
+            joint_jmax: *joint_jmax,
+        },
+    };
+    for (t, what) in [
+        (a.pause_at, "--pause-at"),
+        (a.resume_at, "--resume-at"),
+        (a.stop_at, "--stop-at"),
     ] {
         if let Some(t) = t {
             if !(t.is_finite() && t >= 0.0) {
                 bail!("{what} must be a time >= 0 s, got {t}");
             }
-            r.push(((t / CYCLE_S).round() as usize, kind));
         }
     }
-    r.sort_by_key(|&(k, _)| k);
-    Ok(r)
-}
-
-/// Plans `p` with the chain's planner and interpolator ([`plan_moves`]): every 20 ms cycle from
-/// t = 0 to rest, with the requests `commands` (cycle, PAUSE/RESUME/STOP). Also returns the
-/// composite speed limit of each cycle (NaN outside composites).
-pub fn plan_cycles(
-    robot: &Robot,
-    limits: MotionLimits,
-    check: CheckOptions,
-    p: &PlanProgram,
-    commands: &[(usize, u32)],
-) -> Result<(Vec<PlannedCycle>, Vec<f64>)> {
-    let source = PlannerSource::new(robot.clone(), limits).with_check_options(check);
-    let plan =
-        plan_moves(source, p.start, &p.moves, commands, CYCLE_S).map_err(|e| refusal(e, p))?;
-    let lim = plan
-        .cycles
-        .iter()
-        .map(|c| plan.interp.source().speed_limit_at(c.progress_s))
-        .collect();
-    Ok((plan.cycles, lim))
-}
-
-/// One 20 ms row of the plan.
-struct Row {
-    t: f64,
-    pose: Pose,
-    speed: f64,
-    kappa: [f64; 3],
-    q: [i64; 3],
+    positive(a.amax, "--amax", "mm/s^2")?;
+    positive(a.jmax, "--jmax", "mm/s^3")?;
+    let settings = PlanSettings {
+        from,
+        amax: a.amax,
+        jmax: a.jmax,
+        pause_at: a.pause_at,
+        resume_at: a.resume_at,
+        stop_at: a.stop_at,
+        singularity_margin: a.singularity_margin,
+        rate_fraction: a.rate_fraction,
+    };
+    Ok((shape, settings))
 }
 
 /// Runs `pcr plan`.
 pub fn run(a: Args) -> Result<()> {
     let (cfg, robot_name) = crate::robot_arg::load(a.robot.as_deref())?;
     let robot = Robot::new(&cfg).with_context(|| format!("robot {robot_name}"))?;
-    let from = parse_pose(&a.from, "--from")?;
-    let check = CheckOptions {
-        singularity_margin: a.singularity_margin,
-        rate_fraction: a.rate_fraction,
-    };
-    let prog = build_program(&a, &robot, from)?;
-    let commands = requests(&a)?;
-    let limits = MotionLimits {
-        amax: a.amax,
-        jmax: a.jmax,
-    };
-    positive(a.amax, "--amax", "mm/s^2")?;
-    positive(a.jmax, "--jmax", "mm/s^3")?;
-    let (cycles, speed_limits) = plan_cycles(&robot, limits, check, &prog, &commands)?;
-    let mut rows = Vec::with_capacity(cycles.len());
-    for c in &cycles {
-        let pose = c.pose();
-        let t = c.task.t_s;
-        let s = robot.ik(&pose).with_context(|| {
-            format!("t = {t:.2} s: the planned pose {pose:?} has no IK solution")
-        })?;
-        let mut q = [0i64; 3];
-        for i in 0..3 {
-            q[i] = robot.kappa_to_steps(i, s.kappa[i])?.round() as i64;
-        }
-        rows.push(Row {
-            t,
-            pose,
-            speed: c.speed_mm_s,
-            kappa: s.kappa,
-            q,
-        });
-    }
-    write_csv(a.output.as_deref(), &rows)?;
+    let (shape, settings) = request(&a)?;
+    let plan = plan_request::plan(&robot, &shape, &settings)?;
+    let rows = &plan.rows;
+    write_csv(a.output.as_deref(), rows)?;
     let max_rate: Vec<f64> = (0..3)
         .map(|i| {
             rows.windows(2)
-                .map(|w| (w[1].q[i] - w[0].q[i]).abs() as f64 / (w[1].t - w[0].t))
+                .map(|w| (w[1].q[i] - w[0].q[i]).abs() as f64 / (w[1].t_s - w[0].t_s))
                 .fold(0.0, f64::max)
         })
         .collect();
     eprintln!(
         "plan: {} moves, {:.2} s, {} setpoints every {:.0} ms; max step rate per motor {:.0} / {:.0} / {:.0} steps/s (limit {:.0})",
-        prog.moves.len(),
-        rows.last().map_or(0.0, |r| r.t),
+        plan.moves,
+        rows.last().map_or(0.0, |r| r.t_s),
         rows.len(),
         CYCLE_S * 1e3,
         max_rate[0],
@@ -615,15 +345,15 @@ pub fn run(a: Args) -> Result<()> {
             &robot,
             &rows
                 .iter()
-                .map(|r| (r.t, r.pose.x, r.pose.y, r.speed))
+                .map(|r| (r.t_s, r.pose.x, r.pose.y, r.speed_mm_s))
                 .collect::<Vec<_>>(),
-            &speed_limits,
+            &plan.speed_limits,
         )?;
     }
     Ok(())
 }
 
-fn write_csv(path: Option<&str>, rows: &[Row]) -> Result<()> {
+fn write_csv(path: Option<&str>, rows: &[PlanRow]) -> Result<()> {
     let mut w = crate::csvio::writer(path)?;
     let mut h = vec!["t_s", "xp_mm", "yp_mm", "phip_deg", "speed_mm_s"];
     h.extend([
@@ -637,13 +367,13 @@ fn write_csv(path: Option<&str>, rows: &[Row]) -> Result<()> {
     w.write_record(&h)?;
     for r in rows {
         let mut rec = vec![
-            format!("{:.2}", r.t),
+            format!("{:.2}", r.t_s),
             fmt(r.pose.x),
             fmt(r.pose.y),
             fmt(r.pose.phi.to_degrees()),
-            fmt(r.speed),
+            fmt(r.speed_mm_s),
         ];
-        rec.extend(r.kappa.iter().map(|k| fmt(*k)));
+        rec.extend(r.kappa_per_mm.iter().map(|k| fmt(*k)));
         rec.extend(r.q.iter().map(|q| q.to_string()));
         w.write_record(&rec)?;
     }
@@ -675,23 +405,24 @@ mod tests {
         a: Args,
     }
 
-    fn program_of(args: &[&str]) -> PlanProgram {
+    fn program_of(args: &[&str]) -> plan_request::PlanProgram {
         let cli = Cli::try_parse_from(std::iter::once("plan").chain(args.iter().copied()))
             .unwrap_or_else(|e| panic!("{e}"));
-        build_program(&cli.a, &Robot::nominal(), Pose::default()).unwrap()
+        let (shape, settings) = request(&cli.a).unwrap();
+        plan_request::program(&Robot::nominal(), &shape, &settings).unwrap()
     }
 
     #[test]
     fn the_papers_shapes_are_the_chains_built_in_programs() {
-        let c = program_of(&["circle", "--radius", "50", "--speed", "50"]);
-        assert_eq!(c.moves, paper_circle());
-        assert_eq!(c.names.len(), c.moves.len());
-        let s = program_of(&["square", "--side", "50", "--speed", "50"]);
-        assert_eq!(s.moves, paper_square());
-        assert_eq!(s.names.len(), s.moves.len());
-        let p = program_of(&["paper"]);
-        assert_eq!(p.moves, paper_program());
-        assert_eq!(p.names.len(), p.moves.len());
+        assert_eq!(
+            program_of(&["circle", "--radius", "50", "--speed", "50"]).moves,
+            paper_circle()
+        );
+        assert_eq!(
+            program_of(&["square", "--side", "50", "--speed", "50"]).moves,
+            paper_square()
+        );
+        assert_eq!(program_of(&["paper"]).moves, paper_program());
     }
 
     #[test]
@@ -709,22 +440,10 @@ mod tests {
             "1",
         ])
         .unwrap();
+        let (_, settings) = request(&cli.a).unwrap();
         assert_eq!(
-            requests(&cli.a).unwrap(),
+            plan_request::requests(&settings).unwrap(),
             [(50, command_kind::PAUSE), (150, command_kind::STOP)]
         );
-        let p = build_program(&cli.a, &Robot::nominal(), Pose::default()).unwrap();
-        let (cycles, lim) = plan_cycles(
-            &Robot::nominal(),
-            MotionLimits::default(),
-            CheckOptions::default(),
-            &p,
-            &requests(&cli.a).unwrap(),
-        )
-        .unwrap();
-        assert_eq!(cycles.len(), lim.len());
-        // paused at rest (the stop while paused ends it at once)
-        assert_eq!(cycles[150].state, pcr_messages::planner_state::STOPPED);
-        assert_eq!(cycles.len(), 151);
     }
 }

@@ -7,9 +7,9 @@
 //!   true state in extra columns.
 //! - `pcr plant draw --q 176,176,176 --output shape.svg`: the robot's shape for a static state.
 
-use crate::clock::utc_now;
 use anyhow::{bail, Context};
-use pcr_driver::{Driver, MotorCommand};
+use pcr_offline::clock::utc_now;
+use pcr_offline::plant_run::{self, PASS_THROUGH};
 use pcr_plant::{Equilibrium, Plant, PlantConfig, TruthModel};
 use pcr_recording::{RecordingWriter, Row};
 use pcr_robot::RobotConfig;
@@ -276,50 +276,6 @@ fn equilibrium_cells(eq: &Equilibrium) -> Vec<String> {
     c
 }
 
-/// Recording columns copied from the setpoints file when present.
-const PASS_THROUGH: [&str; 6] = ["xp_mm", "yp_mm", "phip_deg", "pose_id", "rep", "settled"];
-
-/// Extra columns of `pcr plant run`: raw capture-frame values and the true state.
-const RUN_EXTRA: [&str; 37] = [
-    "xc_mm",
-    "yc_mm",
-    "phic_deg",
-    "m1xc_mm",
-    "m1yc_mm",
-    "m2xc_mm",
-    "m2yc_mm",
-    "m3xc_mm",
-    "m3yc_mm",
-    "x_true_mm",
-    "y_true_mm",
-    "phi_true_deg",
-    "m1x_true_mm",
-    "m1y_true_mm",
-    "m2x_true_mm",
-    "m2y_true_mm",
-    "m3x_true_mm",
-    "m3y_true_mm",
-    "q1_drive",
-    "q2_drive",
-    "q3_drive",
-    "q1_motor",
-    "q2_motor",
-    "q3_motor",
-    "q1_out",
-    "q2_out",
-    "q3_out",
-    "dl1_mm",
-    "dl2_mm",
-    "dl3_mm",
-    "bend1_deg",
-    "bend2_deg",
-    "bend3_deg",
-    "f1_n",
-    "f2_n",
-    "f3_n",
-    "fault",
-];
-
 /// Options of `pcr plant run` beyond its files.
 struct RunOptions<'a> {
     capture_frame: bool,
@@ -348,7 +304,8 @@ fn run_series(
     let table = Table::read(input)?;
     let ct = table.col("t_s")?;
     let cols = [table.col("q1")?, table.col("q2")?, table.col("q3")?];
-    let mut setpoints = Vec::with_capacity(table.rows.len());
+    let mut setpoints: Vec<Row> = Vec::with_capacity(table.rows.len());
+    let mut lines = Vec::with_capacity(table.rows.len());
     for row in &table.rows {
         let t = table.num(row, ct)?;
         let mut q = [0i32; 3];
@@ -363,17 +320,6 @@ fn run_series(
                 );
             }
             q[k] = v as i32;
-        }
-        if let Some(&(tp, _, _, _)) = setpoints.last() {
-            if t <= tp {
-                bail!(
-                    "{}: line {}, column `t_s`: {t} does not increase (previous {tp})",
-                    table.origin,
-                    row.0
-                );
-            }
-        } else if t < 0.0 {
-            bail!("{}: line {}: t_s must be >= 0", table.origin, row.0);
         }
         // Planned pose and experiment bookkeeping, copied through when the input has them.
         let mut base = Row::new(t, q);
@@ -402,141 +348,59 @@ fn run_series(
                 _ => base.settled = Some(whole()? == 1),
             }
         }
-        setpoints.push((t, q, row.0, base));
+        setpoints.push(base);
+        lines.push(row.0);
     }
-    let mut meta = vec![
-        ("source".to_string(), "pcr plant run".to_string()),
-        (
-            "robot".to_string(),
-            common
-                .robot
-                .as_ref()
-                .map_or("nominal (built-in)".into(), |p| p.display().to_string()),
-        ),
-        (
-            "plant".to_string(),
-            common
-                .plant
-                .as_ref()
-                .map_or("prototype (built-in)".into(), |p| p.display().to_string()),
-        ),
-        ("seed".to_string(), cfg.seed.to_string()),
-        (
-            "frame".to_string(),
-            if capture_frame { "capture" } else { "robot" }.to_string(),
-        ),
-    ];
-    meta.push(("setpoints".to_string(), input.display().to_string()));
-    // The timing contract: a row's pose is measured before its command is sent, so it answers
-    // the command of the row before (one setpoint spacing earlier).
-    meta.push((
-        pcr_recording::COMMAND_DELAY_KEY.to_string(),
-        pcr_recording::number(median_spacing(
-            setpoints.iter().map(|s| s.0),
-            cfg.simulation.cycle_s,
-        )),
-    ));
-    meta.push(("created".to_string(), utc_now()));
-    let mut known = vec![
-        "x_mm", "y_mm", "phi_deg", "m1x_mm", "m1y_mm", "m2x_mm", "m2y_mm", "m3x_mm", "m3y_mm",
-    ];
-    known.extend(
-        PASS_THROUGH
-            .iter()
-            .filter(|c| table.header.iter().any(|h| h == *c)),
+    let at = |k: usize| format!("{}: line {}", table.origin, lines[k]);
+    plant_run::check_setpoints(&setpoints, &at)?;
+    let run_opts = plant_run::RunOptions {
+        capture_frame,
+        stop_on_fault,
+    };
+    let meta = plant_run::metadata(
+        &common
+            .robot
+            .as_ref()
+            .map_or("nominal (built-in)".into(), |p| p.display().to_string()),
+        &common
+            .plant
+            .as_ref()
+            .map_or("prototype (built-in)".into(), |p| p.display().to_string()),
+        cfg.seed,
+        run_opts,
+        &input.display().to_string(),
+        plant_run::command_delay_s(setpoints.iter().map(|s| s.t_s), cfg.simulation.cycle_s),
+        &utc_now(),
     );
-    let mut w = RecordingWriter::create(output, &meta, &known, &RUN_EXTRA)
+    let known = plant_run::known_columns(&|c| table.header.iter().any(|h| h == c));
+    let mut w = RecordingWriter::create(output, &meta, &known, &plant_run::RUN_EXTRA)
         .with_context(|| format!("cannot create {}", output.display()))?;
-    let frame = plant.capture_model().registered;
-    let mut last_meas = None;
-    let mut faults = 0usize;
-    for (k, (t, q, line, base)) in setpoints.iter().enumerate() {
-        let (t, q, line) = (*t, *q, *line);
-        // Catch up to t (idle if the setpoints have a gap), then record what is known at t.
-        plant
-            .idle_until(t)
-            .with_context(|| format!("{}: line {line}: plant failed", table.origin))?;
-        for m in plant.drain_measurements() {
-            last_meas = Some(m);
-        }
-        let s = plant.true_state().clone();
-        let mut row = base.clone();
-        if let Some(m) = last_meas {
-            let m = if capture_frame {
-                m
-            } else {
-                m.in_robot_frame(&frame)
-            };
-            if let Some(p) = m.pose {
-                row.pose = [Some(p[0]), Some(p[1]), Some(p[2].to_degrees())];
-            }
-            for i in 0..3 {
-                if let Some(p) = m.m[i] {
-                    row.m[i] = [Some(p[0]), Some(p[1])];
+    let faults = plant_run::run_setpoints(
+        &mut plant,
+        &setpoints,
+        run_opts,
+        &at,
+        &mut |c: plant_run::Cycle<'_>| -> anyhow::Result<()> {
+            w.write_row(c.row, c.extra)?;
+            if let Some((dir, every)) = frames {
+                if c.index.is_multiple_of(every) {
+                    let (t, q, eq) = (c.row.t_s, c.row.q, &c.state.eq);
+                    let title = format!(
+                        "t = {t:.2} s, q = ({}, {}, {}): x = {:.2} mm, y = {:.2} mm, phi = {:.2} deg",
+                        q[0],
+                        q[1],
+                        q[2],
+                        eq.pose[0],
+                        eq.pose[1],
+                        eq.pose[2].to_degrees()
+                    );
+                    let path = dir.join(format!("frame_{:05}.svg", c.index / every));
+                    draw_state(&path, robot, c.plant.truth(), eq, &title, None)?;
                 }
             }
-        }
-        let mut extra: Vec<Option<f64>> = Vec::with_capacity(RUN_EXTRA.len());
-        let raw = last_meas;
-        extra.extend(match raw.and_then(|m| m.pose) {
-            Some(p) => [Some(p[0]), Some(p[1]), Some(p[2].to_degrees())],
-            None => [None; 3],
-        });
-        for i in 0..3 {
-            match raw.and_then(|m| m.m[i]) {
-                Some(p) => extra.extend([Some(p[0]), Some(p[1])]),
-                None => extra.extend([None, None]),
-            }
-        }
-        extra.extend([
-            Some(s.eq.pose[0]),
-            Some(s.eq.pose[1]),
-            Some(s.eq.pose[2].to_degrees()),
-        ]);
-        for m in &s.eq.m {
-            extra.extend([Some(m[0]), Some(m[1])]);
-        }
-        extra.extend(s.counter.map(|v| Some(f64::from(v))));
-        extra.extend(s.motor.map(|v| Some(f64::from(v))));
-        extra.extend(s.output.map(Some));
-        extra.extend(s.tendon_mm.map(Some));
-        extra.extend(s.bending.map(|b| Some(b.to_degrees())));
-        extra.extend(s.eq.lambda.map(Some));
-        let drive = plant.read(t, cfg.simulation.cycle_s)?;
-        extra.push(Some(f64::from(u8::from(drive.fault))));
-        w.write_row(&row, &extra)?;
-        if let Some((dir, every)) = frames {
-            if k % every == 0 {
-                let title = format!(
-                    "t = {t:.2} s, q = ({}, {}, {}): x = {:.2} mm, y = {:.2} mm, phi = {:.2} deg",
-                    q[0],
-                    q[1],
-                    q[2],
-                    s.eq.pose[0],
-                    s.eq.pose[1],
-                    s.eq.pose[2].to_degrees()
-                );
-                let path = dir.join(format!("frame_{:05}.svg", k / every));
-                draw_state(&path, robot, plant.truth(), &s.eq, &title, None)?;
-            }
-        }
-        let period = setpoints
-            .get(k + 1)
-            .map_or(cfg.simulation.cycle_s, |n| n.0 - t);
-        let cmd = MotorCommand {
-            steps: q,
-            enable: true,
-        };
-        if let Err(e) = plant.write(t, period, &cmd) {
-            let what = format!("{}: line {line}: setpoint {q:?}: {e}", table.origin);
-            if stop_on_fault {
-                bail!("{what}");
-            }
-            // The plant holds its position and reports a fault, as the real drive would.
-            tracing::warn!("{what}");
-            faults += 1;
-        }
-    }
+            Ok(())
+        },
+    )?;
     if faults > 0 {
         tracing::warn!(
             "{faults} setpoint(s) of {} could not be followed (column `fault`)",
@@ -692,18 +556,6 @@ fn draw_state(
     }
     root.present()?;
     Ok(())
-}
-
-/// The median spacing of the setpoints' times, s (`fallback` for fewer than two).
-fn median_spacing(times: impl Iterator<Item = f64>, fallback: f64) -> f64 {
-    let t: Vec<f64> = times.collect();
-    let mut d: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
-    if d.is_empty() {
-        return fallback;
-    }
-    d.sort_by(f64::total_cmp);
-    // To the nanosecond: differences of row times carry rounding (0.06 - 0.04).
-    (d[d.len() / 2] * 1e9).round() / 1e9
 }
 
 #[cfg(test)]

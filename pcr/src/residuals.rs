@@ -4,14 +4,11 @@
 //!  --report DIR --json out.json --out extended.toml [--no-calibrate]`
 
 use crate::calibrate::load_robot;
-use crate::clock::utc_now;
 use anyhow::{bail, Context as _};
 use indicatif::{ProgressBar, ProgressStyle};
-use pcr_calibration::calibrate::{self, Options as CalOptions};
-use pcr_calibration::StaticData;
-use pcr_recording::Recording;
-use pcr_residuals::recalibration::Recalibration;
-use pcr_residuals::{attribute, Blocks, Options, Series};
+use pcr_offline::clock::utc_now;
+use pcr_offline::residuals_run;
+use pcr_residuals::{attribute, Options};
 use std::path::PathBuf;
 
 /// Arguments of `pcr residuals`.
@@ -58,32 +55,9 @@ pub struct Args {
     report: Option<PathBuf>,
 }
 
-fn read_all(paths: &[PathBuf]) -> anyhow::Result<Vec<(Recording, Series)>> {
-    paths
-        .iter()
-        .map(|p| {
-            let rec = Recording::read_path(p)?;
-            let s = Series::from_recording(&rec, &p.display().to_string())?;
-            Ok((rec, s))
-        })
-        .collect()
-}
-
 /// The extended robot file of an analysis, with a header naming the effects.
 pub(crate) fn extended_file(res: &pcr_residuals::Attribution, created: &str) -> String {
-    format!(
-        "# Extended robot written by `pcr residuals` ({created}): effects {}.\n{}",
-        if res.effects.is_empty() {
-            "none".to_string()
-        } else {
-            res.effects
-                .iter()
-                .map(|e| e.name.as_str())
-                .collect::<Vec<_>>()
-                .join(", ")
-        },
-        res.robot.to_toml_string()
-    )
+    residuals_run::extended_file(res, created)
 }
 
 /// Runs `pcr residuals`.
@@ -109,59 +83,24 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let start = load_robot(a.robot.as_deref())?;
     let drawing = start.clone();
     progress.sink.stage(0, "reading the recordings", 0, 0);
-    let data = read_all(&a.data)?;
-    let holdout = read_all(&a.holdout)?;
+    let data = residuals_run::read_all(&a.data)?;
+    let holdout = residuals_run::read_all(&a.holdout)?;
+    if !a.no_calibrate {
+        progress
+            .sink
+            .stage(0, "calibrating on the static poses of the data", 0, 0);
+    }
     // Calibrate first on the static poses of the data (never of the holdout).
-    let mut recalibration = None;
-    let robot = if a.no_calibrate {
-        start
-    } else {
-        let with_statics = data
-            .iter()
-            .find(|(r, _)| r.rows.iter().any(|x| x.settled == Some(true)));
-        match with_statics {
-            Some((rec, s)) => {
-                let sd = StaticData::from_recording(rec, &s.origin, 1, 1.0 / 3.0)?;
-                progress.sink.stage(
-                    0,
-                    &format!("calibrating on the static poses of {}", s.origin),
-                    0,
-                    0,
-                );
-                let cal = calibrate::calibrate_data(&start, &sd, &CalOptions::default()).context(
-                    "calibration before the residual analysis (--no-calibrate skips it)",
-                )?;
-                recalibration = Some(std::sync::Arc::new(Recalibration {
-                    series: data
-                        .iter()
-                        .position(|(r, _)| std::ptr::eq(r, rec))
-                        .unwrap_or(0),
-                    data: sd,
-                    options: CalOptions::default(),
-                }));
-                progress.say(&format!(
-                    "calibrated on {}: function {}, platform position RMS on its test poses {:.3} mm",
-                    s.origin,
-                    cal.selected,
-                    cal.after.test.map_or(f64::NAN, |t| t.pose.position_rms_mm)
-                ));
-                cal.robot
-            }
-            None => {
-                progress.say("no static poses in --data: the robot file is used as it is");
-                start
-            }
-        }
-    };
-    let train: Vec<Series> = data.into_iter().map(|(_, s)| s).collect();
-    let test: Vec<Series> = holdout.into_iter().map(|(_, s)| s).collect();
-    let (series, blocks) = if test.is_empty() {
-        let b = Blocks::in_time(&train, a.block_s, 3);
-        (train, b)
-    } else {
-        let b = Blocks::by_series(&train, &test, a.block_s);
-        (train.into_iter().chain(test).collect::<Vec<_>>(), b)
-    };
+    let prepared = residuals_run::prepare(
+        &start,
+        &data,
+        &holdout,
+        a.no_calibrate,
+        a.block_s,
+        &|line| progress.say(line),
+    )?;
+    let (robot, series, blocks) = (prepared.robot, prepared.series, prepared.blocks);
+    let recalibration = prepared.recalibration;
     let opts = Options {
         alpha: a.alpha,
         min_effect_mm: a.min_effect_mm,
