@@ -487,20 +487,6 @@ impl<'a> Search<'a> {
         set: &Setting<'a, '_>,
     ) -> Result<Confirmed<'a>, String> {
         let name = f.name;
-        // Consistency before naming: a physical effect takes the same parameters in independent
-        // parts of the data.
-        if let Some(e) = effects::named(name).filter(|e| e.role() == Role::Physical) {
-            set.opts.progress.stage(
-                round,
-                &format!("checking {name} on parts of the data"),
-                0,
-                0,
-            );
-            let train = self.ctx.train();
-            if let Some(why) = crate::consistency::inconsistency(e, &self.ctx, &train, &s.params) {
-                return Err(why);
-            }
-        }
         let points = effect_points(&self.ctx, &f.delta, test);
         set.opts.progress.stage(
             round,
@@ -521,6 +507,21 @@ impl<'a> Search<'a> {
         let (config, ctx) = from_drawing(config, ctx, set);
         if let Some(why) = unphysical(&config, &self.config, set.drawing, set.opts) {
             return Err(why);
+        }
+        // Consistency before naming: a physical effect takes the same parameters in independent
+        // parts of the data. Judged around the model that holds it (where the linearisation
+        // holds), with the values the model holds.
+        if let Some(e) = effects::named(name).filter(|e| e.role() == Role::Physical) {
+            set.opts.progress.stage(
+                round,
+                &format!("checking {name} on parts of the data"),
+                0,
+                0,
+            );
+            let held = current_params(&config, name, &s.params);
+            if let Some(why) = crate::consistency::inconsistency(e, &ctx, &ctx.train(), &held) {
+                return Err(why);
+            }
         }
         let ntest = ctx.test();
         let old = self.ctx.sse(test, None) / test.len() as f64;

@@ -38,14 +38,18 @@ pub struct Removed {
 
 /// The model without one effect, and how the model with it compares on held-out rows.
 pub(crate) struct Without<'a> {
-    /// The configuration without the effect, the rest refitted.
+    /// The configuration without the effect, the rest refitted and recalibrated.
     pub config: RobotConfig,
     /// Its residuals (training and held-out rows).
     pub ctx: Context<'a>,
-    /// Held-out weighted mean square per row without the effect and with it, mm^2.
+    /// Held-out weighted mean square per row without the effect (recalibrated) and with it,
+    /// mm^2.
     pub ms: [f64; 2],
     /// One-sided p-value that the model with the effect is better, paired over held-out blocks.
     pub p: f64,
+    /// Without the effect and before the recalibration: held-out mean square (mm^2) and the
+    /// p-value that the model with the effect is better (the parsimony rule's reference).
+    pub unrecalibrated: (f64, f64),
 }
 
 /// What the pass needs of the attribution's setting.
@@ -83,6 +87,18 @@ pub(crate) fn without<'a>(
     );
     let model = ExtendedModel::like(&refined, &ctx.model).ok()?;
     let mut rctx = Context::new(set.series, model, set.blocks, set.w_phi);
+    let nb = set.blocks.len();
+    let test = ctx.test();
+    let with = sse_per_block(ctx, &test, None, nb);
+    let ms_with = with.iter().sum::<f64>() / test.len().max(1) as f64;
+    let unrecalibrated = {
+        let t = rctx.test();
+        let a = sse_per_block(&rctx, &t, None, nb);
+        (
+            a.iter().sum::<f64>() / t.len().max(1) as f64,
+            paired_p(&a, &with, &set.blocks.held_out),
+        )
+    };
     let mut rcfg = refined;
     if let Some(g) = effects::reference().and_then(|g| g.fit(&rctx, &rctx.train())) {
         let progress = crate::progress::ProgressSink::default();
@@ -93,28 +109,40 @@ pub(crate) fn without<'a>(
             rctx = x;
         }
     }
-    let (test_w, test) = (rctx.test(), ctx.test());
-    let nb = set.blocks.len();
+    let test_w = rctx.test();
     let a = sse_per_block(&rctx, &test_w, None, nb);
-    let b = sse_per_block(ctx, &test, None, nb);
-    let ms = [
-        a.iter().sum::<f64>() / test_w.len().max(1) as f64,
-        b.iter().sum::<f64>() / test.len().max(1) as f64,
-    ];
-    let p = paired_p(&a, &b, &set.blocks.held_out);
+    let ms = [a.iter().sum::<f64>() / test_w.len().max(1) as f64, ms_with];
+    let p = paired_p(&a, &with, &set.blocks.held_out);
     Some(Without {
         config: rcfg,
         ctx: rctx,
         ms,
         p,
+        unrecalibrated,
     })
 }
 
 /// Why an effect does not earn its place (`None` when it does): the forward test's rules with
-/// the model without it as the reference. `n_effects`: the physical effects in the model (the
-/// Bonferroni divisor).
+/// the model without it (recalibrated) as the reference, or, as in the forward test, its
+/// parsimony rule (with it the model gains, significantly, at least 90 % of what the
+/// recalibration gains without it: the simpler explanation of the same residual).
+/// `n_effects`: the physical effects in the model (the Bonferroni divisor).
 pub(crate) fn fails(w: &Without, n_effects: usize, set: &Setting) -> Option<String> {
     let alpha = set.opts.alpha / n_effects.max(1) as f64;
+    let (base, p_base) = w.unrecalibrated;
+    let (gain_with, gain_recal) = (base - w.ms[1], base - w.ms[0]);
+    let simpler = gain_recal > 0.0
+        && gain_with >= 0.9 * gain_recal
+        && p_base < alpha
+        && gain_with.sqrt() >= set.opts.min_effect_mm;
+    if simpler {
+        return None;
+    }
+    main_rule(w, alpha, set)
+}
+
+/// The forward test's main rule against the recalibrated model without the effect.
+fn main_rule(w: &Without, alpha: f64, set: &Setting) -> Option<String> {
     let red = w.ms[0] - w.ms[1];
     let gain = red.signum() * red.abs().sqrt();
     let excess = w.ms[0] - set.noise_ms;

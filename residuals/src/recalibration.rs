@@ -11,9 +11,10 @@
 //! held-out error falls: the better held-out result, from the calibration the analysis began
 //! with or from the drawing, is kept ([`crate::attribution`]).
 //!
-//! Loads (joint springs, an external wrench) bend the segments themselves, which the static
-//! model cannot take off a measurement: with a compliance in the model the calibration is not
-//! made again (the linearised refinement of the calibration parameters stands).
+//! Loads (joint springs, an external wrench) bend the segments: with a compliance in the model,
+//! each static measurement (platform pose and M_i) is corrected by the deflection the model
+//! predicts there (its loaded equilibrium minus its rigid pose and joints at the same
+//! curvatures), so that the static model is calibrated on what the unloaded robot would show.
 
 use crate::context::Context;
 use pcr_calibration::calibrate::{calibrate_data, Options as CalOptions};
@@ -42,9 +43,6 @@ pub fn recalibrated(
     drawing: &RobotConfig,
     recal: &Recalibration,
 ) -> Option<RobotConfig> {
-    if config.effects.compliance.is_some() {
-        return None;
-    }
     let series = ctx.series.get(recal.series)?;
     let preds = ctx.preds.get(recal.series)?;
     let frame = config.effects.frame.as_ref();
@@ -73,6 +71,21 @@ pub fn recalibrated(
             return None;
         }
         p.q_eff = Some(q);
+        if let Some(loads) = &ctx.model.loads {
+            let d = deflection(ctx, loads, q, p.settled.pose?)?;
+            let s = &mut p.settled;
+            if let Some(pose) = &mut s.pose {
+                for k in 0..3 {
+                    pose[k] -= d.0[k];
+                }
+            }
+            for (m, dm) in s.m.iter_mut().zip(d.1) {
+                if let Some(m) = m {
+                    m[0] -= dm[0];
+                    m[1] -= dm[1];
+                }
+            }
+        }
         if let Some(f) = frame {
             let p_settled = &mut p.settled;
             if let Some(pose) = &mut p_settled.pose {
@@ -95,4 +108,34 @@ pub fn recalibrated(
     out.name = config.name.clone();
     out.effects = config.effects.clone();
     Some(out)
+}
+
+/// The deflection the loads of the model cause at motor positions `q` (steps) near the measured
+/// pose `near` (x mm, y mm, phi deg): the loaded equilibrium minus the rigid pose (x mm, y mm,
+/// phi deg) and M_i (mm) at the same curvatures.
+fn deflection(
+    ctx: &Context,
+    loads: &pcr_kinematics::statics::Loads,
+    q: [f64; 3],
+    near: [f64; 3],
+) -> Option<([f64; 3], [[f64; 2]; 3])> {
+    let robot = &ctx.model.robot;
+    let kappa: [f64; 3] = std::array::from_fn(|i| robot.steps_to_kappa(i, q[i]));
+    let guess = pcr_kinematics::Pose::from_mm_deg(near[0], near[1], near[2]);
+    let rigid = robot.fk_warm(&kappa, &guess).ok()?;
+    let loaded = robot.fk_loaded(&kappa, loads, &rigid).ok()?;
+    let m_rigid: [[f64; 2]; 3] = std::array::from_fn(|i| robot.legs[i].joint_m(kappa[i]));
+    Some((
+        [
+            loaded.pose.x - rigid.x,
+            loaded.pose.y - rigid.y,
+            (loaded.pose.phi - rigid.phi).to_degrees(),
+        ],
+        std::array::from_fn(|i| {
+            [
+                loaded.m[i][0] - m_rigid[i][0],
+                loaded.m[i][1] - m_rigid[i][1],
+            ]
+        }),
+    ))
 }
