@@ -573,9 +573,12 @@ impl<'a> Search<'a> {
                 let w = backward::without(&self.config, &self.ctx, &a.name, &a.params, set);
                 set.opts.progress.step();
                 let Some(w) = w else { continue };
-                if let Some(why) = backward::fails(&w, judged.len(), set) {
-                    let gain = w.ms[0] - w.ms[1];
-                    if worst.as_ref().is_none_or(|x| gain < x.1.ms[0] - x.1.ms[1]) {
+                if let Some(why) = backward::fails(&w.cmp, judged.len(), set) {
+                    let gain = w.cmp.ms[0] - w.cmp.ms[1];
+                    if worst
+                        .as_ref()
+                        .is_none_or(|x| gain < x.1.cmp.ms[0] - x.1.cmp.ms[1])
+                    {
                         worst = Some((i, w, why));
                     }
                 }
@@ -588,9 +591,9 @@ impl<'a> Search<'a> {
             removed.push(Removed {
                 params: current_params(&self.config, &a.name, &a.params),
                 name: a.name,
-                held_out_rms_without_mm: w.ms[0].sqrt(),
-                held_out_rms_with_mm: w.ms[1].sqrt(),
-                p_value: w.p,
+                held_out_rms_without_mm: w.cmp.ms[0].sqrt(),
+                held_out_rms_with_mm: w.cmp.ms[1].sqrt(),
+                p_value: w.cmp.p,
                 note: why,
             });
             self.config = w.config;
