@@ -310,33 +310,42 @@ fn geometry_columns(robot: &RobotConfig, model: &Robot, o: &Obs) -> Option<Vec<[
 /// Where targets were visited more than once: the RMS distance of each visit from its target's
 /// mean, against the noise of a visit (`None` without repeated visits).
 fn repeated_visits(data: &StaticData, noise: [f64; 3]) -> Option<String> {
-    let mut by_target: std::collections::BTreeMap<u64, Vec<(f64, [f64; 2], usize)>> =
-        Default::default();
+    let (rms, ratio) = visit_spread(data, noise)?;
+    Some(format!(
+        "repeated visits of one target spread {rms:.3} mm RMS, {ratio:.1} x their noise"
+    ))
+}
+
+/// The spread of repeated visits of one target: the RMS distance (mm) of each visit's position
+/// from its target's mean (over the degrees of freedom), and its ratio to what the capture
+/// noise `noise` (x, y mm per row) explains; `None` without a target visited twice. A ratio
+/// well above 1 says the robot did not come back to where it was: a time-dependent effect
+/// (drift, creep, warming) or a history effect in the static poses.
+pub fn visit_spread(data: &StaticData, noise: [f64; 3]) -> Option<(f64, f64)> {
+    let mut by_target: std::collections::BTreeMap<u64, Vec<([f64; 2], usize)>> = Default::default();
     for p in &data.poses {
         if let (Some(id), Some(pose)) = (p.settled.pose_id, p.settled.pose) {
-            by_target.entry(id).or_default().push((
-                p.settled.t_s[0],
-                [pose[0], pose[1]],
-                p.settled.pose_rows.max(1),
-            ));
+            by_target
+                .entry(id)
+                .or_default()
+                .push(([pose[0], pose[1]], p.settled.pose_rows.max(1)));
         }
     }
     let (mut ss, mut expected, mut dof) = (0.0, 0.0, 0usize);
     for visits in by_target.values().filter(|v| v.len() > 1) {
         let n = visits.len() as f64;
         let mean: [f64; 2] =
-            std::array::from_fn(|j| visits.iter().map(|v| v.1[j]).sum::<f64>() / n);
+            std::array::from_fn(|j| visits.iter().map(|v| v.0[j]).sum::<f64>() / n);
         for v in visits {
-            ss += (v.1[0] - mean[0]).powi(2) + (v.1[1] - mean[1]).powi(2);
-            expected += (noise[0].powi(2) + noise[1].powi(2)) / v.2 as f64 * (n - 1.0) / n;
+            ss += (v.0[0] - mean[0]).powi(2) + (v.0[1] - mean[1]).powi(2);
+            expected += (noise[0].powi(2) + noise[1].powi(2)) / v.1 as f64 * (n - 1.0) / n;
         }
         dof += visits.len() - 1;
     }
     (dof > 0).then(|| {
-        format!(
-            "repeated visits of one target spread {:.3} mm RMS, {:.1} x their noise",
-            (ss / (dof as f64)).sqrt(),
-            (ss / expected.max(f64::MIN_POSITIVE)).sqrt()
+        (
+            (ss / dof as f64).sqrt(),
+            (ss / expected.max(f64::MIN_POSITIVE)).sqrt(),
         )
     })
 }

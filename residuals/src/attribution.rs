@@ -248,6 +248,7 @@ fn attribute_from<'a>(
         opts,
         w_phi,
         noise_ms: capture_noise_ms(series, w_phi),
+        visits_disagree: visits_disagree(opts),
     };
     let first_residuals: Vec<f64> = ctx0.rows.iter().map(|r| r.r[0].hypot(r.r[1])).collect();
     let mut search = Search {
@@ -328,6 +329,8 @@ struct Setting<'a, 'o> {
     w_phi: f64,
     /// What the capture noise explains of a row's weighted mean square, mm^2.
     noise_ms: f64,
+    /// Whether the calibration's repeated visits of one target disagree over time.
+    visits_disagree: bool,
 }
 
 /// What the capture noise explains of a row's weighted mean square, mm^2 (0 without settled
@@ -446,6 +449,11 @@ impl<'a> Search<'a> {
             fits.push((f, s));
         }
         fits.sort_by(|a, b| b.1.total_gain_mm.total_cmp(&a.1.total_gain_mm));
+        // Repeated visits of one target in the calibration that disagree over time are evidence
+        // for a time-dependent effect: a significant one is tried first.
+        if set.visits_disagree {
+            fits.sort_by_key(|(f, s)| !(s.significant && is_time_dependent(f.name)));
+        }
         fits
     }
 
@@ -654,6 +662,26 @@ fn from_drawing<'a>(
         best = (refined, full);
     }
     best
+}
+
+/// Whether an effect changes with time rather than with the pose or the motion's history.
+fn is_time_dependent(name: &str) -> bool {
+    matches!(name, "drift" | "creep")
+}
+
+/// Repeated visits of one target this many times further apart than their noise explains are
+/// evidence for a time-dependent effect in the static poses.
+const VISITS_DISAGREE: f64 = 3.0;
+
+/// Whether the calibration's repeated visits of one target disagree over time
+/// ([`VISITS_DISAGREE`]).
+fn visits_disagree(opts: &Options) -> bool {
+    opts.recalibration.as_ref().is_some_and(|r| {
+        r.data.row_noise.is_some_and(|n| {
+            pcr_calibration::diagnosis::visit_spread(&r.data, n)
+                .is_some_and(|(_, ratio)| ratio > VISITS_DISAGREE)
+        })
+    })
 }
 
 /// Whether `name` is the reference of the scoring ([`Role::Reference`]).
