@@ -34,7 +34,7 @@ pub enum TendonMapError {
 pub const DL_SEARCH_MM: f64 = 60.0;
 
 /// An evaluated tendon map kappa = f(dl) of one leg.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone)]
 pub struct TendonMap {
     kind: TendonMapKind,
     reading: MapReading,
@@ -46,7 +46,19 @@ pub struct TendonMap {
     /// The interval around dl = 0 (within +-[`DL_SEARCH_MM`]) on which the map is strictly
     /// monotonic: the branch the inverse searches, so that a map that turns back far from
     /// the operating range (a cubic with a negative k3) is inverted on the physical branch.
-    branch: [f64; 2],
+    /// Found on first use (a fit evaluates many maps it never inverts).
+    branch: std::sync::OnceLock<[f64; 2]>,
+}
+
+/// Two maps are equal when their family, reading and coefficients are (the branch follows).
+impl PartialEq for TendonMap {
+    fn eq(&self, other: &TendonMap) -> bool {
+        self.kind == other.kind
+            && self.reading == other.reading
+            && self.k == other.k
+            && self.k_neg == other.k_neg
+            && self.n == other.n
+    }
 }
 
 #[inline]
@@ -96,7 +108,7 @@ impl TendonMap {
         {
             m.k_neg[j + 1] = *c;
         }
-        m.branch = m.monotone_branch();
+        m.branch = std::sync::OnceLock::new();
         m
     }
 
@@ -108,16 +120,14 @@ impl TendonMap {
         for (j, c) in coeffs.iter().take(kind.n_coeffs()).enumerate() {
             k[j + off] = *c;
         }
-        let mut m = TendonMap {
+        TendonMap {
             kind,
             reading: MapReading::Symmetric,
             k,
             k_neg: k,
             n: kind.n_coeffs() + off,
-            branch: [-DL_SEARCH_MM, DL_SEARCH_MM],
-        };
-        m.branch = m.monotone_branch();
-        m
+            branch: std::sync::OnceLock::new(),
+        }
     }
 
     /// The interval around dl = 0 where the slope keeps the sign it has at 0 (boundaries to
@@ -174,7 +184,7 @@ impl TendonMap {
     /// The interval of tendon displacements (mm) around 0 on which the map is strictly
     /// monotonic (within +-[`DL_SEARCH_MM`]): where [`TendonMap::dl_for_kappa`] searches.
     pub fn invertible_range(&self) -> [f64; 2] {
-        self.branch
+        *self.branch.get_or_init(|| self.monotone_branch())
     }
 
     /// The family.
@@ -343,7 +353,7 @@ impl TendonMap {
             }
             return Ok(dl);
         }
-        let [mut lo, mut hi] = self.branch;
+        let [mut lo, mut hi] = self.invertible_range();
         if hi - lo <= 0.0 {
             return Err(TendonMapError::NotMonotonic(self.kind));
         }
@@ -384,8 +394,8 @@ impl TendonMap {
     }
 
     fn out_of_range(&self, kappa: f64) -> TendonMapError {
-        let a = self.kappa(self.branch[0]);
-        let b = self.kappa(self.branch[1]);
+        let [lo, hi] = self.invertible_range();
+        let (a, b) = (self.kappa(lo), self.kappa(hi));
         TendonMapError::OutOfRange {
             kappa,
             lo: a.min(b),
