@@ -139,14 +139,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         res.before.position_rms_mm, res.before.orientation_rms_deg
     );
     for e in &res.effects {
-        let p: Vec<String> = e
-            .params
-            .iter()
-            .map(|p| match p.std {
-                Some(s) => format!("{} = {:.4} +- {:.4} {}", p.name, p.value, s, p.unit),
-                None => format!("{} = {:.4} {}", p.name, p.value, p.unit),
-            })
-            .collect();
+        let p: Vec<String> = e.params.iter().map(|p| p.text("+-")).collect();
         println!(
             "added {}: {} (held-out gain {:.3} mm, p = {:.1e})",
             e.name,

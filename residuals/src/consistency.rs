@@ -18,7 +18,7 @@
 
 use crate::context::Context;
 use crate::effects::Effect;
-use crate::fitted::Estimate;
+use crate::fitted::{significant, Estimate};
 
 /// Which independent parts of the training rows a candidate's parameters are compared on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -136,8 +136,8 @@ pub fn disagreements(whole: &[Estimate], a: &[Estimate], b: &[Estimate]) -> Vec<
         };
         if differs {
             let pm = |p: &Estimate| match p.std {
-                Some(s) => format!("{} +- {}", sig(p.value), sig(s)),
-                None => sig(p.value),
+                Some(s) => format!("{} +- {}", significant(p.value), significant(s)),
+                None => significant(p.value),
             };
             out.push(format!(
                 "{} {} against {} {}",
@@ -149,19 +149,6 @@ pub fn disagreements(whole: &[Estimate], a: &[Estimate], b: &[Estimate]) -> Vec<
         }
     }
     out
-}
-
-/// A value with four significant digits.
-fn sig(v: f64) -> String {
-    if v == 0.0 || !v.is_finite() {
-        return format!("{v}");
-    }
-    let digits = (3 - v.abs().log10().floor() as i32).max(0) as usize;
-    if digits > 8 {
-        format!("{v:.3e}")
-    } else {
-        format!("{v:.digits$}")
-    }
 }
 
 #[cfg(test)]

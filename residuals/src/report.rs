@@ -23,10 +23,7 @@ pub enum ReportError {
 }
 
 fn fmt_param(p: &crate::fitted::Estimate) -> String {
-    match p.std {
-        Some(s) => format!("{} = {:.4} ± {:.4} {}", p.name, p.value, s, p.unit),
-        None => format!("{} = {:.4} {}", p.name, p.value, p.unit),
-    }
+    p.text("±")
 }
 
 /// Writes `report.md` and its figures into `dir`; `inputs` names the recordings.
