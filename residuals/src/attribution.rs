@@ -466,7 +466,11 @@ impl<'a> Search<'a> {
         set: &Setting<'a, '_>,
     ) -> bool {
         let test = self.ctx.test();
-        for (f, s) in fits.into_iter().filter(|(_, s)| s.significant) {
+        for (f, s) in fits
+            .into_iter()
+            .filter(|(_, s)| s.significant)
+            .take(MAX_CONFIRMATIONS)
+        {
             let name = f.name;
             match self.confirm(round, f, &s, &test, set) {
                 Ok(c) => {
@@ -610,6 +614,12 @@ impl<'a> Search<'a> {
         removed
     }
 }
+
+/// Most significant candidates of a round put into the full model: when the best three are
+/// not confirmed (the full model does not keep their gain, they leave the drawing, their
+/// parameters disagree between parts of the data), the ones that explain less are not tried
+/// (each costs a full acceptance) and the search ends.
+const MAX_CONFIRMATIONS: usize = 3;
 
 /// Most alternations of the calibration from the drawing and the effects' refinement.
 const FROM_DRAWING_ROUNDS: usize = 3;
