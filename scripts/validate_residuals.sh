@@ -30,15 +30,18 @@
 #               full-size analysis above --time-budget-s of cpu on one core (pinned)
 #   --jobs N    cases in parallel, each pinned to its own core (default 1: core 1)
 #   --reuse     report again from the analyses of an earlier run (no new analysis)
-# Environment: PCR_VALIDATION_TIME_BUDGET_S (default 10).
-# Builds target/release/pcr unless --pcr is given. Takes long: the full sweep records about 150
+# Environment: PCR_VALIDATION_TIME_BUDGET_S (default 10); PCR_BIN, the pcr to run (default: the
+# release build, made first, as the other scripts/check_*.sh do; --pcr overrides both). Takes long: the full sweep records about 150
 # calibration recordings (hours on one core); the reduced one about 5 minutes on two cores.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=.venv/bin/python
 [ -x "$PY" ] || PY=python3
 case " $* " in
-  *" --pcr "*|*" --list "*) ;;
-  *) cargo build --release -q -p pcr ;;
+  *" --pcr "*|*" --list "*) exec "$PY" scripts/validate_residuals.py "$@" ;;
 esac
-exec "$PY" scripts/validate_residuals.py "$@"
+if [ -z "${PCR_BIN:-}" ]; then
+  cargo build --release -q -p pcr
+  PCR_BIN="${CARGO_TARGET_DIR:-$PWD/target}/release/pcr"
+fi
+exec "$PY" scripts/validate_residuals.py --pcr "$PCR_BIN" "$@"
