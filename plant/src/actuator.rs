@@ -1,5 +1,6 @@
 //! Stepper motor, firmware and gear of one leg: step-rate limit, missed steps above the pull-out
-//! rate, and gear backlash (play) between the motor and the tendon roll.
+//! rate, periodic transmission errors of the gear, and gear backlash (play) between the gear and
+//! the tendon roll.
 
 use rand::Rng;
 
@@ -14,8 +15,38 @@ pub struct Actuator {
     pub output: f64,
     /// Width of the play, steps (0 = no backlash).
     pub backlash: f64,
+    /// Periodic transmission errors of the gear (none = an exact gear).
+    pub gear_errors: Vec<GearTerm>,
     /// Steps still to do in the current cycle (signed) and their spacing.
     plan: StepPlan,
+}
+
+/// One periodic term of a gear's transmission error: the gear turns short of the rotor by
+/// `amplitude sin(wavenumber q + phase)` steps at rotor position q.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GearTerm {
+    /// 2 pi / period, rad per step.
+    pub wavenumber: f64,
+    /// Amplitude, steps.
+    pub amplitude: f64,
+    /// Phase at q = 0, rad.
+    pub phase: f64,
+}
+
+impl GearTerm {
+    /// A term of period `period_steps`, amplitude `amplitude_steps` and phase `phase_deg`.
+    pub fn new(period_steps: f64, amplitude_steps: f64, phase_deg: f64) -> GearTerm {
+        GearTerm {
+            wavenumber: std::f64::consts::TAU / period_steps,
+            amplitude: amplitude_steps,
+            phase: phase_deg.to_radians(),
+        }
+    }
+
+    /// How far the gear output is behind the rotor at rotor position `q`, steps.
+    fn lag(&self, q: f64) -> f64 {
+        self.amplitude * (self.wavenumber * q + self.phase).sin()
+    }
 }
 
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -51,8 +82,23 @@ impl Actuator {
             motor: steps,
             output: steps as f64,
             backlash,
+            gear_errors: Vec::new(),
             plan: StepPlan::default(),
         }
+    }
+
+    /// The same actuator with these periodic transmission errors of its gear, the output
+    /// centred in its play about the gear's position.
+    pub fn with_gear_errors(mut self, terms: Vec<GearTerm>) -> Actuator {
+        self.gear_errors = terms;
+        self.output = self.gear_position();
+        self
+    }
+
+    /// Where the gear (before the play) is for the rotor's position, steps.
+    pub fn gear_position(&self) -> f64 {
+        let q = f64::from(self.motor);
+        q - self.gear_errors.iter().map(|t| t.lag(q)).sum::<f64>()
     }
 
     /// Plans the cycle `[t0, t0 + period]` towards `target`; returns whether the rate cap limited
@@ -108,13 +154,23 @@ impl Actuator {
         self.plan.done < self.plan.total.abs()
     }
 
+    /// A motor step made outside the stepper model (firmware in the loop): the counter and
+    /// the rotor go to `pos`, the output follows through the gear and the play. No rate limit,
+    /// no missed steps.
+    pub fn external_step(&mut self, pos: i32) {
+        self.motor += pos - self.counter;
+        self.counter = pos;
+        self.take_up_play();
+    }
+
+    /// The tendon roll follows the gear once the gear has taken up the slack of the play.
     fn take_up_play(&mut self) {
         let half = 0.5 * self.backlash;
-        let m = self.motor as f64;
-        if m - self.output > half {
-            self.output = m - half;
-        } else if self.output - m > half {
-            self.output = m + half;
+        let g = self.gear_position();
+        if g - self.output > half {
+            self.output = g - half;
+        } else if self.output - g > half {
+            self.output = g + half;
         }
     }
 }
@@ -143,6 +199,32 @@ mod tests {
         a.plan_cycle(0.04, 0.02, 3, &p);
         a.advance_to(0.06, 0.0, &mut rng);
         assert_eq!(a.output, 5.0);
+    }
+
+    #[test]
+    fn a_gear_error_moves_the_output_periodically_in_the_rotor_position() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+        let p = StepperParams {
+            max_rate: None,
+            pull_out_rate: None,
+            miss_probability: 0.0,
+        };
+        let mut a = Actuator::new(0, 0.0).with_gear_errors(vec![GearTerm::new(8.0, 0.5, 90.0)]);
+        // At q = 0 the gear lags by 0.5 sin(90 deg).
+        assert!((a.output + 0.5).abs() < 1e-12);
+        for target in 1..=16 {
+            a.plan_cycle(0.02 * target as f64, 0.02, target, &p);
+            a.advance_to(0.02 * (target + 1) as f64, 0.0, &mut rng);
+            let want = target as f64
+                - 0.5
+                    * (std::f64::consts::TAU * target as f64 / 8.0 + std::f64::consts::FRAC_PI_2)
+                        .sin();
+            assert!(
+                (a.output - want).abs() < 1e-12,
+                "{target}: {} vs {want}",
+                a.output
+            );
+        }
     }
 
     #[test]

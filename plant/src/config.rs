@@ -141,6 +141,29 @@ pub struct Stepper {
     pub backlash: bool,
     /// Play between motor and tendon roll per leg, motor steps.
     pub backlash_steps: [f64; 3],
+    /// Periodic transmission errors of the gears (default none): each term makes the gear
+    /// output of its motor lag the motor periodically in the motor's position (an eccentric
+    /// gear or pinion, a worn tooth). Terms on the same motor add.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub periodic: Vec<PeriodicGearError>,
+}
+
+/// One periodic transmission error of a motor's gear: the gear output of motor `motor` is
+/// `q - amplitude_steps sin(2 pi q / period_steps + phase)` where q is the rotor position
+/// (steps, absolute: the drive's step counter less missed steps); the play, when there is one,
+/// lies after it (between the gear and the tendon roll).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PeriodicGearError {
+    /// Motor 1..3.
+    pub motor: u8,
+    /// Period, motor steps (a gear's revolution, a pinion's tooth, ...).
+    pub period_steps: f64,
+    /// Amplitude of the output's lag, motor steps; below period / (2 pi), so that the output
+    /// still moves forward with the motor.
+    pub amplitude_steps: f64,
+    /// Phase at q = 0, degrees.
+    pub phase_deg: f64,
 }
 
 /// Slow tendon creep: elongation e relaxes towards `compliance * tension` with a time constant.
@@ -165,6 +188,35 @@ pub struct Drift {
     pub enabled: bool,
     /// Elongation rate per leg, mm/s (positive: the tendon lengthens).
     pub rate_mm_per_s: [f64; 3],
+}
+
+/// The lab's temperature cycle (air conditioning) seen by the tendons: each tendon's length
+/// follows it, `e_i(t) = A_i (sin(2 pi t / P + phase) - sin(phase))` with the plant's time t
+/// (zero at the plant's start), without limit of time but bounded, unlike drift; not in the
+/// residual tools' library (whose drift and creep imitate it over part of a cycle).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Thermal {
+    /// Switch.
+    pub enabled: bool,
+    /// Amplitude of the elongation per leg, mm (positive: the tendon lengthens while the sine
+    /// is positive).
+    pub amplitude_mm: [f64; 3],
+    /// Period of the cycle, s.
+    pub period_s: f64,
+    /// Phase of the cycle at the plant's start, degrees.
+    pub phase_deg: f64,
+}
+
+impl Default for Thermal {
+    fn default() -> Thermal {
+        Thermal {
+            enabled: false,
+            amplitude_mm: [0.0; 3],
+            period_s: 1200.0,
+            phase_deg: 0.0,
+        }
+    }
 }
 
 /// Coulomb friction (elastic-perfectly-plastic Jenkins elements: stick stiffness and slip limit).
@@ -259,6 +311,9 @@ pub struct PlantConfig {
     /// Steady tendon drift (off when absent).
     #[serde(default)]
     pub drift: Drift,
+    /// The lab's temperature cycle on the tendons (off when absent).
+    #[serde(default)]
+    pub thermal: Thermal,
     /// Friction.
     pub friction: Friction,
     /// Motion capture.
@@ -307,6 +362,7 @@ impl PlantConfig {
                 miss_probability: 0.0,
                 backlash: false,
                 backlash_steps: [0.0; 3],
+                periodic: Vec::new(),
             },
             creep: Creep {
                 enabled: false,
@@ -314,6 +370,7 @@ impl PlantConfig {
                 time_constant_s: 30.0,
             },
             drift: Drift::default(),
+            thermal: Thermal::default(),
             friction: Friction {
                 joints: false,
                 joint_torque_n_mm: 0.0,
@@ -374,6 +431,7 @@ impl PlantConfig {
             miss_probability: 0.02,
             backlash: true,
             backlash_steps: [3.0, 4.0, 3.0],
+            periodic: Vec::new(),
         };
         c.creep = Creep {
             enabled: true,
@@ -558,7 +616,35 @@ impl PlantConfig {
             "must be in [0, 1]",
         )?;
         check3("stepper.backlash_steps", &s.backlash_steps, 0.0, 200.0)?;
+        for (k, p) in s.periodic.iter().enumerate() {
+            let key = |f: &str| format!("stepper.periodic[{}].{f}", k + 1);
+            if !(1..=3).contains(&p.motor) {
+                return Err(bad(&key("motor"), p.motor.to_string(), "must be 1, 2 or 3"));
+            }
+            check(
+                &key("period_steps"),
+                p.period_steps,
+                (2.0..=1e6).contains(&p.period_steps),
+                "must be in [2, 1e6] steps",
+            )?;
+            check(
+                &key("amplitude_steps"),
+                p.amplitude_steps,
+                p.amplitude_steps.abs() < p.period_steps / std::f64::consts::TAU,
+                "must be below period_steps / (2 pi) in magnitude (the output must move forward with the motor)",
+            )?;
+            check(&key("phase_deg"), p.phase_deg, true, "must be finite")?;
+        }
         check3("drift.rate_mm_per_s", &self.drift.rate_mm_per_s, -1.0, 1.0)?;
+        let th = &self.thermal;
+        check3("thermal.amplitude_mm", &th.amplitude_mm, -10.0, 10.0)?;
+        check(
+            "thermal.period_s",
+            th.period_s,
+            th.period_s > 0.0,
+            "must be > 0 s",
+        )?;
+        check("thermal.phase_deg", th.phase_deg, true, "must be finite")?;
         let c = &self.creep;
         check(
             "creep.compliance_mm_per_n",

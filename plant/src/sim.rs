@@ -2,7 +2,7 @@
 //! history (backlash, friction, creep), the true state and motion-capture samples. Implements
 //! [`pcr_driver::Driver`].
 
-use crate::actuator::{Actuator, StepperParams};
+use crate::actuator::{Actuator, GearTerm, StepperParams};
 use crate::capture::{CaptureModel, Measurement};
 use crate::config::{PlantConfig, PlantConfigError};
 use crate::segment::{self, SegmentParams};
@@ -137,10 +137,17 @@ impl Plant {
             support_force: if f.supports { f.support_force_n } else { 0.0 },
             support_stiffness: f.support_stick_stiffness_n_per_mm,
         });
-        let act = std::array::from_fn(|i| {
+        let act: [Actuator; 3] = std::array::from_fn(|i| {
+            let terms = s
+                .periodic
+                .iter()
+                .filter(|p| usize::from(p.motor) == i + 1)
+                .map(|p| GearTerm::new(p.period_steps, p.amplitude_steps, p.phase_deg))
+                .collect();
             Actuator::new(home[i], if s.backlash { s.backlash_steps[i] } else { 0.0 })
+                .with_gear_errors(terms)
         });
-        let output = home.map(f64::from);
+        let output: [f64; 3] = std::array::from_fn(|i| act[i].output);
         let loads = Loads {
             phi_b: truth.robot.bending_of_steps(&output, &[0.0; 3]),
             wrench: truth.wrench,
@@ -464,7 +471,7 @@ impl Plant {
             while next < steps.len() && (steps[next].t_s <= t + 1e-12 || t >= t_end) {
                 let s = steps[next];
                 if let Some(a) = self.act.get_mut(s.motor) {
-                    external_step(a, s.pos);
+                    a.external_step(s.pos);
                 }
                 next += 1;
             }
@@ -491,17 +498,25 @@ impl Plant {
         self.settle_substep(t, dt)
     }
 
-    /// The tendons' elongation at `t`: creep plus the steady drift grown since the plant's
-    /// start, mm.
+    /// The tendons' elongation at `t`: creep, the steady drift grown since the plant's start and
+    /// the temperature cycle's part, mm.
     fn elongation(&self, t: f64) -> [f64; 3] {
         let d = &self.cfg.drift;
+        let th = &self.cfg.thermal;
+        let t = t.max(0.0);
+        let cycle = if th.enabled {
+            let ph = th.phase_deg.to_radians();
+            (std::f64::consts::TAU * t / th.period_s + ph).sin() - ph.sin()
+        } else {
+            0.0
+        };
         std::array::from_fn(|i| {
-            self.creep[i]
-                + if d.enabled {
-                    d.rate_mm_per_s[i] * t.max(0.0)
-                } else {
-                    0.0
-                }
+            let drift = if d.enabled {
+                d.rate_mm_per_s[i] * t
+            } else {
+                0.0
+            };
+            self.creep[i] + drift + th.amplitude_mm[i] * cycle
         })
     }
 
@@ -643,21 +658,6 @@ impl Plant {
         }
         let last = h.back().expect("history is never empty");
         (last.1, last.2)
-    }
-}
-
-/// A motor step made outside the plant's stepper model (firmware in the loop): the counter and
-/// the rotor go to `pos`, the gear output follows through the play (as `Actuator` does for its
-/// own steps). No rate limit, no missed steps.
-fn external_step(a: &mut Actuator, pos: i32) {
-    a.motor += pos - a.counter;
-    a.counter = pos;
-    let half = 0.5 * a.backlash;
-    let m = f64::from(a.motor);
-    if m - a.output > half {
-        a.output = m - half;
-    } else if a.output - m > half {
-        a.output = m + half;
     }
 }
 
