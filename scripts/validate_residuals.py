@@ -52,14 +52,31 @@ ROOT = Path(__file__).resolve().parent.parent
 EI_N_MM2 = 6.5e4
 L_C_MM = 125.0
 A_MM = 7.0
-# Creep: the plant's elongation relaxes to compliance x tension, tension = EI phi_b / (l_C a),
-# phi_b = dl / a; the library's gain is elongation per mm of displacement.
-CREEP_GAIN_PER_MM_PER_N = EI_N_MM2 / (L_C_MM * A_MM * A_MM)
+# Creep: the plant's elongation e relaxes to c x tension with time constant T, tension =
+# EI phi_b / (l_C a), phi_b = (dl - e) / a: the elongation feeds back on the tension that makes
+# it. With k = EI / (l_C a^2) (tension per mm of effective displacement), e relaxes to
+# c k / (1 + c k) of the commanded displacement, with time constant T / (1 + c k): those are the
+# library's gain (elongation per mm of displacement) and time constant.
+CREEP_K_N_PER_MM = EI_N_MM2 / (L_C_MM * A_MM * A_MM)
+CREEP_T_S = 20.0
+
+
+def creep_truth(compliance):
+    ck = compliance * CREEP_K_N_PER_MM
+    g = ck / (1.0 + ck)
+    return {"gain leg 1": g, "gain leg 2": g, "gain leg 3": g,
+            "time constant": CREEP_T_S / (1.0 + ck)}
 
 # Physical effects of the residual library and its recalibrations (which absorb, not explain).
 LIBRARY = ["backlash", "latency", "creep", "drift", "joint_springs", "external_load", "frame",
            "periodic"]
 RECALIBRATIONS = ["geometry", "tendon_map"]
+# Library effects the calibration's own parameters can take in whole: a rigid error of the
+# capture frame is, to within the noise, a change of the legs' base angles and lengths within
+# the drawing's tolerance. Not named and the held-out error within --max-after-floor of the
+# floor, such an effect is "absorbed by the calibration" (reported, not a failure): there is
+# nothing left to explain, and a model without a prior on the geometry cannot tell the two apart.
+ABSORBABLE = {"frame"}
 
 
 def arr(v):
@@ -109,10 +126,7 @@ EFFECTS = {
         "creep", "2e-3 mm/N, T = 20 s",
         lambda f: [("creep", "enabled", "true"), ("creep", "compliance_mm_per_n", repr(2e-3 * f)),
                    ("creep", "time_constant_s", "20.0")],
-        lambda f: {"gain leg 1": 2e-3 * f * CREEP_GAIN_PER_MM_PER_N,
-                   "gain leg 2": 2e-3 * f * CREEP_GAIN_PER_MM_PER_N,
-                   "gain leg 3": 2e-3 * f * CREEP_GAIN_PER_MM_PER_N,
-                   "time constant": 20.0},
+        lambda f: creep_truth(2e-3 * f),
         lambda f: "%s mm/N, T 20 s" % fmt_num(2e-3 * f)),
     "drift": Effect(
         "drift", "3e-4 mm/s on leg 2",
@@ -584,7 +598,10 @@ def evaluate(case, seed, conv, factors, res, t, floor, rows, err, args):
         run["detected"][e] = found
         at_test = f >= 1.0 - 1e-9
         if not found:
-            if at_test:
+            if e in ABSORBABLE and run["after_floor"] is not None and \
+                    run["after_floor"] <= args.max_after_floor:
+                run.setdefault("absorbed", []).append(e)
+            elif at_test:
                 failures.append("missed %s" % e)
             continue
         for p in compare_params(e, f, res):
@@ -610,8 +627,9 @@ def evaluate(case, seed, conv, factors, res, t, floor, rows, err, args):
             case.full_size or args.size == "full"):
         failures.append("%.1f s cpu on one core" % t["cpu_s"])
     run["failures"] = failures
-    run["summary"] = "%s; named %s%s; after/floor %s" % (
+    run["summary"] = "%s; named %s%s%s; after/floor %s" % (
         run["verdict"], ", ".join(physical) or "nothing",
+        (" (absorbed by the calibration: %s)" % ", ".join(run["absorbed"])) if run.get("absorbed") else "",
         (" (+%s)" % ", ".join(run["recalibrations"])) if run["recalibrations"] else "",
         "%.2f" % run["after_floor"] if run["after_floor"] else "?") + (
         " -- " + "; ".join(failures) if failures else "")
@@ -681,6 +699,7 @@ def aggregate(case_list, runs, factors, notes):
             continue
         n = len(rs)
         det = {e: sum(1 for r in rs if r["detected"].get(e)) for e, _ in c.library_effects()}
+        absorbed = {e: sum(1 for r in rs if e in r.get("absorbed", [])) for e, _ in c.library_effects()}
         false = {}
         for r in rs:
             truth_names = {e for e, _ in c.library_effects()}
@@ -722,7 +741,7 @@ def aggregate(case_list, runs, factors, notes):
                     worst = max(worst, abs(p["est"] - q["est"]) / p["std"])
         aggs.append({
             "case": c.id, "kind": c.kind, "n": n, "truth": rs[0]["truth"],
-            "factors": rs[0]["factors"], "detected": det, "false": false, "params": pstats,
+            "factors": rs[0]["factors"], "detected": det, "absorbed": absorbed, "false": false, "params": pstats,
             "after_floor_median": statistics.median(ratios) if ratios else None,
             "after_floor_max": max(ratios) if ratios else None,
             "wall_max_s": max(walls) if walls else None, "cpu_max_s": max(cpus) if cpus else None,
@@ -795,7 +814,9 @@ def markdown(case_list, runs, aggs, limits, args, meta):
         if not a["n"]:
             L.append("| %s | %s | 0 | | | | | | | | | %s |" % (a["case"], a["truth"], a["note"]))
             continue
-        det = ", ".join("%s %d/%d" % (e, k, a["n"]) for e, k in a["detected"].items()) or "-"
+        det = ", ".join("%s %d/%d%s" % (e, k, a["n"], (" (absorbed by the calibration %d/%d)" % (
+            a["absorbed"][e], a["n"])) if a.get("absorbed", {}).get(e) else "")
+            for e, k in a["detected"].items()) or "-"
         false = ", ".join("%s %d/%d" % (e, k, a["n"]) for e, k in sorted(a["false"].items())) or "-"
         ps = "<br>".join("%s %s: %s +- %s (%s) [%d/%d]" % (
             p["effect"], p["param"], fmt(p["bias"], "%+.3g"), fmt(p["spread"]), fmt(p["stated_std"]),

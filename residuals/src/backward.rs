@@ -14,7 +14,7 @@ use crate::effects::{self, Role};
 use crate::fitted::Estimate;
 use crate::model::ExtendedModel;
 use crate::options::Options;
-use crate::scoring::{paired_p, sse_per_block, MIN_SHARE};
+use crate::scoring::{paired_ratio_p, sse_per_block, MIN_SHARE};
 use crate::series::{Blocks, Series};
 use pcr_robot::RobotConfig;
 use serde::Serialize;
@@ -103,7 +103,7 @@ pub(crate) fn without<'a>(
         let a = sse_per_block(&rctx, &t, None, nb);
         (
             a.iter().sum::<f64>() / t.len().max(1) as f64,
-            paired_p(&a, &with, &set.blocks.held_out),
+            paired_ratio_p(&a, &with, &set.blocks.held_out),
         )
     };
     let mut rcfg = refined;
@@ -119,7 +119,7 @@ pub(crate) fn without<'a>(
     let test_w = rctx.test();
     let a = sse_per_block(&rctx, &test_w, None, nb);
     let ms = [a.iter().sum::<f64>() / test_w.len().max(1) as f64, ms_with];
-    let p = paired_p(&a, &with, &set.blocks.held_out);
+    let p = paired_ratio_p(&a, &with, &set.blocks.held_out);
     Some(Without {
         config: rcfg,
         ctx: rctx,

@@ -86,8 +86,8 @@ pub fn inconsistency(
     whole: &[Estimate],
 ) -> Option<String> {
     let (parts, names) = split(effect.consistency(), ctx, train)?;
-    let fa = effect.fit(ctx, &parts[0])?;
-    let fb = effect.fit(ctx, &parts[1])?;
+    let fa = effect.fit_like(ctx, &parts[0], whole)?;
+    let fb = effect.fit_like(ctx, &parts[1], whole)?;
     let disagree = disagreements(whole, &fa.params, &fb.params);
     (!disagree.is_empty()).then(|| {
         format!(
@@ -119,7 +119,12 @@ pub fn disagreements(whole: &[Estimate], a: &[Estimate], b: &[Estimate]) -> Vec<
         ) else {
             continue;
         };
-        let diff = (pa.value - pb.value).abs();
+        // A phase is an angle: the difference the short way round.
+        let diff = if w.name == "phase" {
+            ((pa.value - pb.value + 180.0).rem_euclid(360.0) - 180.0).abs()
+        } else {
+            (pa.value - pb.value).abs()
+        };
         let larger = pa.value.abs().max(pb.value.abs());
         let differs = match (w.std, pa.std, pb.std) {
             // A fitted value: clearly non-zero in the whole fit, apart by Z combined errors and

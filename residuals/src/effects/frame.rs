@@ -11,6 +11,10 @@ use crate::linear::Columns;
 use pcr_robot::effects::{self as robot, Effects};
 use pcr_robot::RobotConfig;
 
+/// How much farther than the geometry a plausible capture frame may be off
+/// ([`Effect::unphysical`]).
+pub const FRAME_SCALE: f64 = 10.0;
+
 /// The `frame` candidate.
 #[derive(Debug)]
 pub struct Frame;
@@ -141,11 +145,15 @@ impl Effect for Frame {
         }
     }
 
-    /// A registration off by more than `max_change` mm or a third of it in degrees would be
-    /// seen at once: 1 deg is 5 mm at the base points.
+    /// A registration is a lab's setting of the capture frame (markers placed on the base plate
+    /// by hand, a wand, a fixture), not a part of the robot: millimetres and degrees off are a
+    /// plausible error of it, unlike the same change of the robot's geometry. Ten times
+    /// `max_change` (30 mm, 10 deg by default) is not an error of registration but another
+    /// frame (the recording's origin elsewhere): that is refused.
     fn unphysical(&self, effects: &Effects, max_change: f64) -> Option<String> {
         let f = effects.frame.as_ref()?;
-        (f.dx_mm.hypot(f.dy_mm) > max_change || f.dphi_deg.abs() > max_change / 3.0).then(|| {
+        let (mm, deg) = (FRAME_SCALE * max_change, FRAME_SCALE * max_change / 3.0);
+        (f.dx_mm.hypot(f.dy_mm) > mm || f.dphi_deg.abs() > deg).then(|| {
             format!(
                 "a capture frame off by ({:.2}, {:.2}) mm and {:.2} deg",
                 f.dx_mm, f.dy_mm, f.dphi_deg

@@ -111,6 +111,13 @@ pub trait Effect: Extension {
     /// of the current model's residuals; `None` when it cannot be fitted.
     fn fit(&self, ctx: &Context, train: &[usize]) -> Option<Fitted>;
 
+    /// Fits it on `train` as the whole fit `whole` was made: its searched values (a motor, a
+    /// period) kept, its continuous parameters fitted again. The consistency check compares
+    /// parts of the data with it ([`crate::consistency`]). [`Effect::fit`] by default.
+    fn fit_like(&self, ctx: &Context, train: &[usize], _whole: &[Estimate]) -> Option<Fitted> {
+        self.fit(ctx, train)
+    }
+
     /// Its parameters as the robot file declares them (without standard errors), as its fit
     /// names them; `None` when the file does not declare it or the fitted values stand (the
     /// default).

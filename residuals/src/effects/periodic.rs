@@ -42,29 +42,14 @@ impl Extension for Periodic {
     }
 }
 
-impl Effect for Periodic {
-    fn name(&self) -> &'static str {
-        "periodic"
-    }
-
-    fn description(&self) -> &'static str {
-        "periodic transmission error: the output of one motor lags it periodically in its position"
-    }
-
-    /// Fitted once: its motor and period are scanned from scratch.
-    fn iterable(&self) -> bool {
-        false
-    }
-
-    /// Every acceptance adds a term.
-    fn repeatable(&self) -> bool {
-        true
-    }
-
-    /// The output of one motor lags it by A sin(2 pi q / P + phase): every motor and every
-    /// period from 4 steps to a revolution that repeats at least [`MIN_CYCLES`] times over the
-    /// motor's travel in the data is scanned, the best pair is fitted.
-    fn fit(&self, ctx: &Context, train: &[usize]) -> Option<Fitted> {
+impl Periodic {
+    /// The fit, its motor and period scanned (`only`: the motor index and the period given).
+    fn fit_searched(
+        &self,
+        ctx: &Context,
+        train: &[usize],
+        only: Option<(usize, f64)>,
+    ) -> Option<Fitted> {
         let spr = ctx.model.config.legs[0].actuation.steps_per_rev as f64;
         let mut periods: Vec<f64> = (4..=256).map(f64::from).collect();
         let mut p = 272.0;
@@ -76,6 +61,9 @@ impl Effect for Periodic {
         // with itself, then scan.
         let mut best: Option<(f64, usize, f64)> = None; // (sse reduction, motor, period)
         for m in 0..3 {
+            if only.is_some_and(|(om, _)| om != m) {
+                continue;
+            }
             let (lo, hi) = train
                 .iter()
                 .fold((f64::INFINITY, f64::NEG_INFINITY), |a, &i| {
@@ -93,7 +81,10 @@ impl Effect for Periodic {
                     (c, row.r, ctx.pred(row).q_eff[m])
                 })
                 .collect();
-            for &per in periods.iter().filter(|p| **p <= longest) {
+            for &per in periods
+                .iter()
+                .filter(|p| only.map_or(**p <= longest, |(_, op)| (**p - op).abs() < 1e-9))
+            {
                 let w = std::f64::consts::TAU / per;
                 let (mut ss, mut sc, mut cc, mut rs, mut rc) = (0.0, 0.0, 0.0, 0.0, 0.0);
                 for (c, r, q) in &rows {
@@ -166,6 +157,45 @@ impl Effect for Periodic {
             }),
         })
     }
+}
+
+impl Effect for Periodic {
+    fn name(&self) -> &'static str {
+        "periodic"
+    }
+
+    fn description(&self) -> &'static str {
+        "periodic transmission error: the output of one motor lags it periodically in its position"
+    }
+
+    /// Fitted once: its motor and period are scanned from scratch.
+    fn iterable(&self) -> bool {
+        false
+    }
+
+    /// Every acceptance adds a term.
+    fn repeatable(&self) -> bool {
+        true
+    }
+
+    /// The output of one motor lags it by A sin(2 pi q / P + phase): every motor and every
+    /// period from 4 steps to a revolution that repeats at least [`MIN_CYCLES`] times over the
+    /// motor's travel in the data is scanned, the best pair is fitted.
+    fn fit(&self, ctx: &Context, train: &[usize]) -> Option<Fitted> {
+        self.fit_searched(ctx, train, None)
+    }
+
+    /// The motor and the period of the whole fit `whole`, their amplitude and phase fitted
+    /// again: a part of the data holds too few positions of a motor to scan them afresh.
+    fn fit_like(&self, ctx: &Context, train: &[usize], whole: &[Estimate]) -> Option<Fitted> {
+        let value = |n: &str| whole.iter().find(|p| p.name == n).map(|p| p.value);
+        match (value("motor"), value("period")) {
+            (Some(m), Some(p)) if (1.0..=3.0).contains(&m) => {
+                self.fit_searched(ctx, train, Some((m.round() as usize - 1, p)))
+            }
+            _ => self.fit(ctx, train),
+        }
+    }
 
     /// The term of the motor and period it was added with (the last term if they match none).
     fn remove(&self, effects: &mut Effects, params: &[Estimate]) {
@@ -185,6 +215,12 @@ impl Effect for Periodic {
 
     fn file_position(&self) -> u8 {
         8
+    }
+
+    /// The first half of the training time against the second: both halves take every position
+    /// of the motor at rest and moving, the static rows alone take too few of them.
+    fn consistency(&self) -> crate::consistency::Parts {
+        crate::consistency::Parts::Halves
     }
 
     /// The amplitude (steps) and the phase (deg) of every term.
