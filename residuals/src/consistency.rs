@@ -12,7 +12,7 @@
 //! recording. The candidate is fitted on each part as on the whole (with the calibration
 //! parameters), and a parameter disagrees when it is clearly non-zero in the whole fit and the
 //! two parts' values differ by more than [`Z`] combined standard errors *and* by more than
-//! [`REL`] of the larger of the two (the standard errors of a linear fit over thousands of
+//! [`REL`] of the larger of the two and the whole's value (the standard errors of a linear fit over thousands of
 //! correlated rows are optimistic; a physical effect's values differ between parts by far less
 //! than a third, an imitation's by far more).
 
@@ -125,7 +125,11 @@ pub fn disagreements(whole: &[Estimate], a: &[Estimate], b: &[Estimate]) -> Vec<
         } else {
             (pa.value - pb.value).abs()
         };
-        let larger = pa.value.abs().max(pb.value.abs());
+        // The parts are fitted around the model that holds the effect: some effects report the
+        // value they hold plus what a part adds (a load), others only what a part adds (a creep
+        // gain, a drift rate). The share is of the largest of the three, the held value among
+        // them: two small additions 0.002 apart on a gain of 0.019 agree.
+        let larger = pa.value.abs().max(pb.value.abs()).max(w.value.abs());
         let differs = match (w.std, pa.std, pb.std) {
             // A fitted value: clearly non-zero in the whole fit, apart by Z combined errors and
             // by REL of the larger.

@@ -89,13 +89,18 @@ impl Effect for Backlash {
                 .collect();
             motor_change(ctx, &q_new, rows)
         };
-        // From scratch: every play up to 20 steps. Once the model holds a play (a Gauss-Newton
+        // From scratch: every play up to 64 steps. Once the model holds a play (a Gauss-Newton
         // step of its acceptance), the play moves little from one step to the next: 3 steps
         // around it.
         let held = e.backlash.as_ref().map(|b| b.steps);
         let grid_of = |m: usize| -> Vec<f64> {
             match held {
-                None => (0..=40).map(|k| 0.5 * k as f64).collect(),
+                // Half steps to 20, then whole steps to 64 (a play of 40 steps was found at the
+                // grid's end and walked to its value by the acceptance, without a std).
+                None => (0..=40)
+                    .map(|k| 0.5 * k as f64)
+                    .chain((21..=64).map(f64::from))
+                    .collect(),
                 Some(h) => (-6..=6)
                     .map(|k| h[m] + 0.5 * k as f64)
                     .filter(|v| *v >= 0.0)

@@ -60,9 +60,19 @@ pub(crate) fn minimise_1d(f: &mut dyn FnMut(f64) -> f64, grid: &[f64]) -> (f64, 
     } else {
         (x, fx)
     };
-    let h = ((hi - lo) * 0.05).max(1e-9);
-    let curv = (f(x + h) - 2.0 * fx + f(x - h)) / (h * h);
-    (x, fx, (curv > 0.0).then_some(curv))
+    // The curvature over a twentieth of the bracket; where the SSE is not smooth on that scale
+    // (a play acting on whole steps), over wider steps, up to the bracket's half.
+    let mut h = ((hi - lo) * 0.05).max(1e-9);
+    let mut curv = None;
+    for _ in 0..3 {
+        let c = (f(x + h) - 2.0 * fx + f(x - h)) / (h * h);
+        if c > 0.0 {
+            curv = Some(c);
+            break;
+        }
+        h *= 3.0;
+    }
+    (x, fx, curv)
 }
 
 /// Standard error of a profiled parameter from the curvature of the SSE.
