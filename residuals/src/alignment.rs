@@ -78,13 +78,15 @@ const PROFILE_ROWS: usize = 8000;
 /// Fewest moving rows and blocks for an estimate.
 const MIN_ROWS: usize = 50;
 const MIN_BLOCKS: usize = 3;
-/// Coarse scan: from `min(-SCAN_BEFORE, D - SCAN_BEFORE)` to `D + SCAN_AFTER`, step `SCAN_STEP`, s.
+/// Coarse scan: from `min(-SCAN_BEFORE, D - SCAN_BEFORE)` to `D + SCAN_AFTER`, step `SCAN_STEP`,
+/// then `SCAN_STEP / 4` over one coarse step either side of its minimum, s. (The SSE over the
+/// delay is smooth on the scale of a move's acceleration, tens of milliseconds.)
 const SCAN_BEFORE: f64 = 0.1;
 const SCAN_AFTER: f64 = 0.5;
-const SCAN_STEP: f64 = 0.005;
+const SCAN_STEP: f64 = 0.02;
 /// Fine grid: +- `FINE_HALF` around the coarse minimum, step `FINE_STEP`, s.
 const FINE_HALF: f64 = 0.01;
-const FINE_STEP: f64 = 0.0005;
+const FINE_STEP: f64 = 0.001;
 /// A departure from the declaration is reported when it exceeds this many standard errors and
 /// `MIN_DEPARTURE_PERIODS` control periods (a tenth of a cycle is well inside what a recorder's
 /// timing can be; a wrong declaration is a whole cycle or more).
@@ -166,24 +168,34 @@ fn align_series(ctx: &Context, si: usize) -> Timing {
         );
         return out;
     }
-    // Coarse scan of the total SSE.
+    // Coarse scan of the total SSE, then a finer one around its minimum.
     let lo = (-SCAN_BEFORE).min(declared - SCAN_BEFORE);
     let n = ((declared + SCAN_AFTER - lo) / SCAN_STEP).round() as usize;
-    let coarse: Vec<(f64, f64)> = (0..=n)
-        .map(|k| {
-            let d = lo + k as f64 * SCAN_STEP;
-            (
-                d,
-                per_block_sse(ctx, si, &rows, d - delay_now, &blocks, None)
-                    .iter()
-                    .sum(),
-            )
-        })
-        .collect();
-    let best = coarse
-        .iter()
-        .min_by(|a, b| a.1.total_cmp(&b.1))
-        .map_or(declared, |c| c.0);
+    let total_at =
+        |d: f64| -> f64 { per_block_sse(ctx, si, &rows, d - delay_now, &blocks, None).iter().sum() };
+    let argmin = |pts: Vec<(f64, f64)>, or: f64| {
+        pts.iter()
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map_or(or, |c| c.0)
+    };
+    let coarse = argmin(
+        (0..=n)
+            .map(|k| {
+                let d = lo + k as f64 * SCAN_STEP;
+                (d, total_at(d))
+            })
+            .collect(),
+        declared,
+    );
+    let best = argmin(
+        (-4..=4)
+            .map(|k| {
+                let d = coarse + f64::from(k) * SCAN_STEP / 4.0;
+                (d, total_at(d))
+            })
+            .collect(),
+        coarse,
+    );
     // Fine grid with the SSE per block.
     let m = (2.0 * FINE_HALF / FINE_STEP).round() as usize;
     let grid: Vec<f64> = (0..=m)

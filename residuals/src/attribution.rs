@@ -15,7 +15,7 @@ use crate::features::{self, FeatureLink, Features};
 use crate::fitted::{Estimate, Fitted};
 use crate::model::ExtendedModel;
 use crate::options::Options;
-use crate::plausibility::unphysical;
+use crate::plausibility::{effects_unphysical, leaves_drawing, unphysical};
 use crate::scoring::{Reference, Round};
 use crate::series::{Blocks, Series};
 use pcr_robot::RobotConfig;
@@ -257,11 +257,23 @@ fn attribute_from<'a>(
         scores: Vec::new(),
         added: Vec::new(),
         effect_plots: Vec::new(),
+        provisional: None,
+        banned: Vec::new(),
     };
-    for round in 1..=opts.max_rounds {
-        let fits = search.fit_and_score(round, &set);
-        if !search.add_best(round, fits, &set) {
-            break;
+    // The forward rounds; when effects taken in provisionally leave the drawing with every
+    // effect found, the search goes back and tries the next candidate of that round instead
+    // (at most `MAX_RESTARTS` times).
+    let mut first = 1;
+    for restart in 0..=MAX_RESTARTS {
+        for round in first..=opts.max_rounds {
+            let fits = search.fit_and_score(round, &set);
+            if !search.add_best(round, fits, &set) {
+                break;
+            }
+        }
+        match search.settle_provisional(&set) {
+            Some(round) if restart < MAX_RESTARTS => first = round,
+            _ => break,
         }
     }
     let removed = search.backward(&backward::Setting {
@@ -277,6 +289,8 @@ fn attribute_from<'a>(
         scores,
         mut added,
         effect_plots,
+        provisional: _,
+        banned: _,
     } = search;
     opts.progress.stage(0, "what remains", ctx.rows.len(), 0);
     // The values the final model holds (joint refinements move earlier effects too).
@@ -353,14 +367,30 @@ struct Search<'a> {
     added: Vec<Added>,
     /// Per added effect, its plot data ([`effect_points`]).
     effect_plots: Vec<(String, Vec<(f64, f64)>)>,
+    /// The search as it was before the first effect taken in provisionally, and the effects
+    /// taken in so (round, name, why).
+    provisional: Option<(Snapshot<'a>, Vec<(usize, String, String)>)>,
+    /// Candidates not to put into the model again in a round (round, name): taken in
+    /// provisionally there and gone back on.
+    banned: Vec<(usize, String, String)>,
 }
 
-/// An effect the full model confirmed.
+/// The state of a [`Search`] to go back to.
+struct Snapshot<'a> {
+    config: RobotConfig,
+    ctx: Context<'a>,
+    added: usize,
+    plots: usize,
+}
+
+/// An effect the full model confirmed; `provisional`: why its geometry leaves the drawing when
+/// it is taken in provisionally.
 struct Confirmed<'a> {
     config: RobotConfig,
     ctx: Context<'a>,
     added: Added,
     points: Vec<(f64, f64)>,
+    provisional: Option<String>,
 }
 
 impl<'a> Search<'a> {
@@ -435,7 +465,7 @@ impl<'a> Search<'a> {
             } else {
                 pre
             };
-            let Some(f) = fitted.filter(within_linearisation) else {
+            let Some(f) = fitted.map(within_linearisation) else {
                 continue;
             };
             let s = if is_reference(f.name) {
@@ -467,7 +497,19 @@ impl<'a> Search<'a> {
     ) -> bool {
         let test = self.ctx.test();
         let n_candidates = fits.len();
-        let (sure, near): (Vec<_>, Vec<_>) = fits.into_iter().partition(|(_, s)| s.significant);
+        let banned: Vec<(String, String)> = self
+            .banned
+            .iter()
+            .filter(|(r, _, _)| *r == round)
+            .map(|(_, n, why)| (n.clone(), why.clone()))
+            .collect();
+        for (n, why) in &banned {
+            mark(&mut self.scores, round, n, why.clone());
+        }
+        let (sure, near): (Vec<_>, Vec<_>) = fits
+            .into_iter()
+            .filter(|(f, _)| !banned.iter().any(|(n, _)| n == f.name))
+            .partition(|(_, s)| s.significant);
         let near: Vec<_> = near
             .into_iter()
             .filter(|(f, s)| near_miss(f.name, s, set.opts))
@@ -486,6 +528,18 @@ impl<'a> Search<'a> {
             let whole = judged_whole.then_some(n_candidates);
             match self.confirm(round, f, &s, &test, set, whole) {
                 Ok(c) => {
+                    if let Some(why) = &c.provisional {
+                        let snap = Snapshot {
+                            config: self.config.clone(),
+                            ctx: self.ctx.clone(),
+                            added: self.added.len(),
+                            plots: self.effect_plots.len(),
+                        };
+                        self.provisional
+                            .get_or_insert_with(|| (snap, Vec::new()))
+                            .1
+                            .push((round, name.to_string(), why.clone()));
+                    }
                     if judged_whole {
                         if let Some(x) = self
                             .scores
@@ -540,9 +594,17 @@ impl<'a> Search<'a> {
         )
         .ok_or_else(|| "the full model does not lower the training error".to_string())?;
         let (config, ctx) = from_drawing(config, ctx, set);
-        if let Some(why) = unphysical(&config, &self.config, set.drawing, set.opts) {
-            return Err(why);
+        let bad = effects_unphysical(&config, set.opts);
+        let leaves = leaves_drawing(&config, &self.config, set.drawing, set.opts);
+        if !bad.is_empty() {
+            let all: Vec<String> = leaves.into_iter().chain(bad).collect();
+            return Err(format!("unphysical: {}", all.join(", ")));
         }
+        // A geometry that leaves the drawing with the effect in may be an effect not yet in the
+        // model that is in the static poses (a creep beside a drift): the effect is taken in
+        // provisionally, and the search judges the geometry once the others are in
+        // ([`Search::settle_provisional`]). Only a physical effect with a held-out gain.
+        let provisional = leaves.map(|why| format!("unphysical: {why}"));
         // Consistency before naming: a physical effect takes the same parameters in independent
         // parts of the data. Judged around the model that holds it (where the linearisation
         // holds), with the values the model holds.
@@ -598,11 +660,47 @@ impl<'a> Search<'a> {
             ctx,
             added,
             points,
+            provisional,
         })
     }
 }
 
 impl<'a> Search<'a> {
+    /// Plausibility on the joint solution: effects taken in while the geometry left the drawing
+    /// stay when the model with every effect found brings the geometry back (no further from
+    /// the drawing than before the first of them); otherwise the search goes back to where it
+    /// was before them, and they are marked with the reason.
+    /// Returns the round to search again from when it went back.
+    fn settle_provisional(&mut self, set: &Setting<'a, '_>) -> Option<usize> {
+        let (snap, taken) = self.provisional.take()?;
+        let why = leaves_drawing(&self.config, &snap.config, set.drawing, set.opts)?;
+        self.config = snap.config;
+        self.ctx = snap.ctx;
+        self.added.truncate(snap.added);
+        self.effect_plots.truncate(snap.plots);
+        let first = taken.first().map(|(r, n, _)| (*r, n.clone()));
+        for (round, name, _) in taken {
+            mark(
+                &mut self.scores,
+                round,
+                &name,
+                format!("unphysical with every effect found in: {why}"),
+            );
+        }
+        let (round, name) = first?;
+        let note = self
+            .scores
+            .iter()
+            .rev()
+            .find(|s| s.round == round && s.name == name)
+            .map(|s| s.note.clone())
+            .unwrap_or_default();
+        self.banned.push((round, name, note));
+        // The scores of the rounds searched again are those of the new search.
+        self.scores.retain(|s| s.round < round);
+        Some(round)
+    }
+
     /// The backward pass ([`crate::backward`]): every physical effect is tested against the
     /// model without it; of those that fail, the one that earns least is taken out and the
     /// others refitted, until every effect passes. Returns what was taken out.
@@ -714,6 +812,10 @@ fn judge_full_model(
     }
 }
 
+/// Most times the forward search goes back on effects taken in provisionally
+/// ([`Search::settle_provisional`]) and searches again.
+const MAX_RESTARTS: usize = 2;
+
 /// Most significant candidates of a round put into the full model: when the best three are
 /// not confirmed (the full model does not keep their gain, they leave the drawing, their
 /// parameters disagree between parts of the data), the ones that explain less are not tried
@@ -798,12 +900,43 @@ fn is_reference(name: &str) -> bool {
     effects::named(name).is_some_and(|e| e.role() == Role::Reference)
 }
 
-/// A linearised change of more than 20 mm (or 20 weighted mm of orientation) on a row is
-/// outside the linearisation: such a fit is not scored.
-fn within_linearisation(f: &Fitted) -> bool {
-    f.delta
+/// Largest linearised change of a row that is scored as it is, mm (or weighted mm of
+/// orientation).
+const LINEARISATION_MM: f64 = 20.0;
+
+/// A fit whose linearised change exceeds [`LINEARISATION_MM`] on some row is outside the
+/// linearisation: it is scored on the step that keeps every row within it (its change scaled
+/// down; the damped first step of its acceptance), which understates its gain. Such a fit is
+/// not dropped: an effect strong enough to have bent the calibration (a tendon drifting 2.6 mm
+/// over the calibration recording) asks the calibration parameters for a change that large, and
+/// it is the one the data need most.
+fn within_linearisation(mut f: Fitted) -> Fitted {
+    let largest = f
+        .delta
         .iter()
-        .all(|d| d[0].hypot(d[1]) < 20.0 && d[2].abs() < 20.0)
+        .fold(0.0f64, |m, d| m.max(d[0].hypot(d[1])).max(d[2].abs()));
+    if largest >= LINEARISATION_MM {
+        let s = 0.5 * LINEARISATION_MM / largest;
+        for d in f.delta.iter_mut() {
+            for v in d.iter_mut() {
+                *v *= s;
+            }
+        }
+        if let Some(a) = f.alone.as_mut() {
+            let la = a
+                .iter()
+                .fold(0.0f64, |m, d| m.max(d[0].hypot(d[1])).max(d[2].abs()));
+            if la >= LINEARISATION_MM {
+                let sa = 0.5 * LINEARISATION_MM / la;
+                for d in a.iter_mut() {
+                    for v in d.iter_mut() {
+                        *v *= sa;
+                    }
+                }
+            }
+        }
+    }
+    f
 }
 
 impl Verdict {

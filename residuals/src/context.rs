@@ -158,7 +158,7 @@ impl<'a> Context<'a> {
                         c
                     })
                     .collect();
-                std::sync::Arc::new(NuisanceTable { nui, cols })
+                std::sync::Arc::new(NuisanceTable::new(nui, cols))
             })
             .clone()
     }

@@ -170,4 +170,67 @@ pub struct NuisanceTable {
     pub nui: Nuisance,
     /// Columns per row (the context's rows, in order).
     pub cols: Vec<Vec<[f64; 3]>>,
+    /// The per-block products of the columns with themselves, per set of rows (keyed by a hash
+    /// of the rows), computed on first use ([`NuisanceTable::gram`]).
+    pub grams: std::sync::Mutex<
+        std::collections::HashMap<u64, std::sync::Arc<crate::linear::NuisanceGram>>,
+    >,
+}
+
+impl NuisanceTable {
+    /// The table of `nui` with the columns `cols`.
+    pub fn new(nui: Nuisance, cols: Vec<Vec<[f64; 3]>>) -> NuisanceTable {
+        NuisanceTable {
+            nui,
+            cols,
+            grams: Default::default(),
+        }
+    }
+
+    /// The per-block `G_b^T G_b` over the rows `idx` of `ctx` (whose table this is), in block
+    /// order; cached.
+    pub fn gram(
+        &self,
+        ctx: &crate::context::Context,
+        idx: &[usize],
+    ) -> std::sync::Arc<crate::linear::NuisanceGram> {
+        use std::hash::{Hash, Hasher};
+        let mut h = std::collections::hash_map::DefaultHasher::new();
+        idx.hash(&mut h);
+        let key = h.finish();
+        if let Some(g) = self.grams.lock().ok().and_then(|m| m.get(&key).cloned()) {
+            return g;
+        }
+        let n = self.nui.n;
+        let nb = idx.iter().map(|&i| ctx.rows[i].block + 1).max().unwrap_or(1);
+        let mut per: Vec<Option<nalgebra::DMatrix<f64>>> = vec![None; nb];
+        for &i in idx {
+            let g = &self.cols[i];
+            let m = per[ctx.rows[i].block].get_or_insert_with(|| nalgebra::DMatrix::zeros(n, n));
+            for a in 0..n {
+                for b in a..n {
+                    m[(a, b)] += g[a][0] * g[b][0] + g[a][1] * g[b][1] + g[a][2] * g[b][2];
+                }
+            }
+        }
+        let out: crate::linear::NuisanceGram = per
+            .into_iter()
+            .enumerate()
+            .filter_map(|(b, m)| {
+                m.map(|mut m| {
+                    for a in 0..n {
+                        for c in 0..a {
+                            m[(a, c)] = m[(c, a)];
+                        }
+                    }
+                    (b, m)
+                })
+            })
+            .collect();
+        let out = std::sync::Arc::new(out);
+        if let Ok(mut m) = self.grams.lock() {
+            m.insert(key, out.clone());
+        }
+        out
+    }
 }

@@ -18,6 +18,30 @@ pub(crate) fn unphysical(
     drawing: &RobotConfig,
     opts: &Options,
 ) -> Option<String> {
+    let mut why: Vec<String> = leaves_drawing(c, current, drawing, opts).into_iter().collect();
+    why.extend(effects_unphysical(c, opts));
+    (!why.is_empty()).then(|| format!("unphysical: {}", why.join(", ")))
+}
+
+/// Why the effects `c` declares are not physical (springs or creep of the wrong sign, a
+/// capture frame beyond a registration error, a motion that leads its command), from the last
+/// entry of the robot file back to the first; empty when they are.
+pub(crate) fn effects_unphysical(c: &RobotConfig, opts: &Options) -> Vec<String> {
+    effects::in_file_order()
+        .iter()
+        .rev()
+        .filter_map(|e| e.unphysical(&c.effects, opts.max_geometry_change))
+        .collect()
+}
+
+/// Why the geometry of `c` is further from the drawing than that of `current` (beyond
+/// `max_geometry_change` mm or deg), if it is.
+pub(crate) fn leaves_drawing(
+    c: &RobotConfig,
+    current: &RobotConfig,
+    drawing: &RobotConfig,
+    opts: &Options,
+) -> Option<String> {
     let lim = opts.max_geometry_change;
     let params = |l: &pcr_robot::LegConfig| {
         [
@@ -49,17 +73,12 @@ pub(crate) fn unphysical(
     };
     let (new_excess, far) = excess(c);
     let (old_excess, _) = excess(current);
-    let mut why = Vec::new();
-    if new_excess > old_excess + 1e-9 {
-        why.push(format!(
+    (new_excess > old_excess + 1e-9).then(|| {
+        format!(
             "the geometry would leave the drawing ({}; more than {lim} mm or deg)",
             far.join(", ")
-        ));
-    }
-    for effect in effects::in_file_order().iter().rev() {
-        why.extend(effect.unphysical(&c.effects, lim));
-    }
-    (!why.is_empty()).then(|| format!("unphysical: {}", why.join(", ")))
+        )
+    })
 }
 
 #[cfg(test)]

@@ -95,11 +95,11 @@ impl Effect for Backlash {
         let held = e.backlash.as_ref().map(|b| b.steps);
         let grid_of = |m: usize| -> Vec<f64> {
             match held {
-                // Half steps to 20, then whole steps to 64 (a play of 40 steps was found at the
-                // grid's end and walked to its value by the acceptance, without a std).
+                // Half steps to 20, then every second step to 64 (a play of 40 steps was found at
+                // the grid's end and walked to its value by the acceptance, without a std).
                 None => (0..=40)
                     .map(|k| 0.5 * k as f64)
-                    .chain((21..=64).map(f64::from))
+                    .chain((11..=32).map(|k| 2.0 * k as f64))
                     .collect(),
                 Some(h) => (-6..=6)
                     .map(|k| h[m] + 0.5 * k as f64)

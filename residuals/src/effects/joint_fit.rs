@@ -53,6 +53,10 @@ pub(crate) fn fit_joint(
         }
     };
     // Residual with the offset taken out: solve on a shifted context copy of r.
+    let solve = |c: &Context| match &table {
+        Some(t) => linear::solve_joint(c, train, n_e, effect, t, Some(&prior)),
+        None => linear::solve_with_prior(c, train, n, &cols, Some(&prior)),
+    };
     let fit = match offset {
         Some(o) => {
             let mut shifted = ctx.clone();
@@ -61,9 +65,9 @@ pub(crate) fn fit_joint(
                     row.r[k] -= d[k];
                 }
             }
-            linear::solve_with_prior(&shifted, train, n, &cols, Some(&prior))?
+            solve(&shifted)?
         }
-        None => linear::solve_with_prior(ctx, train, n, &cols, Some(&prior))?,
+        None => solve(ctx)?,
     };
     let mut delta = linear::deltas(ctx, n, &fit.x, &cols);
     if let Some(o) = offset {
