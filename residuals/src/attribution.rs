@@ -510,9 +510,18 @@ impl<'a> Search<'a> {
             .into_iter()
             .filter(|(f, _)| !banned.iter().any(|(n, _)| n == f.name))
             .partition(|(_, s)| s.significant);
+        // A near miss must do better than every recalibration of the round (linearised): a
+        // richer tendon map that explains more is the simpler account of the same residual
+        // (on foreign-f0, a 0.1-step "periodic" of 240 steps imitated the map).
+        let recal_best = near
+            .iter()
+            .chain(sure.iter())
+            .filter(|(f, _)| effects::named(f.name).is_some_and(|e| e.role() != Role::Physical))
+            .map(|(_, s)| s.held_out_rms_after_mm)
+            .fold(f64::INFINITY, f64::min);
         let near: Vec<_> = near
             .into_iter()
-            .filter(|(f, s)| near_miss(f.name, s, set.opts))
+            .filter(|(f, s)| near_miss(f.name, s, set.opts) && s.held_out_rms_after_mm < recal_best)
             .collect();
         let mut tried = 0;
         for ((f, s), judged_whole) in sure
