@@ -187,12 +187,30 @@ impl Segment {
     }
 }
 
-/// (sin x, cos x): the Taylor series to x^14 for |x| <= 0.5 (error below 1e-16), the library's
-/// beyond.
+/// (sin x, cos x): Taylor series, to x^6 for |x| <= 0.02, to x^10 for |x| <= 0.1, to x^14 for
+/// |x| <= 0.5 (each with an error below 1e-17), the library's beyond.
 #[inline]
 fn sin_cos_small(x: f64) -> (f64, f64) {
-    if x.abs() > 0.5 {
+    let ax = x.abs();
+    if ax > 0.5 {
         return x.sin_cos();
+    }
+    let x2 = x * x;
+    if ax <= 0.02 {
+        let s = x * (1.0 + x2 * (-1.0 / 6.0 + x2 * (1.0 / 120.0)));
+        let c = 1.0 + x2 * (-0.5 + x2 * (1.0 / 24.0 + x2 * (-1.0 / 720.0)));
+        return (s, c);
+    }
+    if ax <= 0.1 {
+        let s = x
+            * (1.0
+                + x2 * (-1.0 / 6.0
+                    + x2 * (1.0 / 120.0 + x2 * (-1.0 / 5040.0 + x2 * (1.0 / 362880.0)))));
+        let c = 1.0
+            + x2 * (-0.5
+                + x2 * (1.0 / 24.0
+                    + x2 * (-1.0 / 720.0 + x2 * (1.0 / 40320.0 + x2 * (-1.0 / 3628800.0)))));
+        return (s, c);
     }
     // Horner in x^2 with the Taylor coefficients 1/n!.
     const S: [f64; 7] = [
@@ -214,7 +232,6 @@ fn sin_cos_small(x: f64) -> (f64, f64) {
         1.0 / 479001600.0,
         -1.0 / 87178291200.0,
     ];
-    let x2 = x * x;
     let mut s = S[6];
     for k in (0..6).rev() {
         s = s * x2 + S[k];
@@ -636,28 +653,38 @@ impl Robot {
         z: &VN,
         mode: SegmentMode,
     ) -> Evaluation {
-        let pose = Pose::new(z[0], z[1], z[2]);
         let mut out = VN::zeros();
         let mut sum_f = [loads.force[0], loads.force[1]];
         let mut sum_m = loads.couple;
         let mut input = [[0.0; 3]; 3];
         let mut outs = [[0.0; 3]; 3];
+        let (sp, cp) = z[2].sin_cos();
+        let springs = loads.k_m != 0.0 || loads.k_p != 0.0;
         for i in 0..3 {
             let leg = &self.legs[i];
             let sg = &st.seg[i];
             let m = [sg.m0[0] + z[6 + 2 * i], sg.m0[1] + z[7 + 2 * i]];
-            let p = self.joint_p(i, &pose);
+            // P_i - E and P_i (geometry.md eq. 5).
+            let pe = [
+                cp * leg.p_e[0] - sp * leg.p_e[1],
+                sp * leg.p_e[0] + cp * leg.p_e[1],
+            ];
+            let p = [z[0] + pe[0], z[1] + pe[1]];
             let d = g::sub(p, m);
             let l = leg.l_st;
             out[i] = (g::dot(d, d) - l * l) / (2.0 * l);
             let u = g::scale(1.0 / g::norm(d).max(1e-9), d);
-            let gamma = g::signed_angle(sg.t, d);
-            let pe = g::sub(p, [pose.x, pose.y]);
-            let zeta = g::signed_angle(pe, g::sub(m, p));
-            let tau = -loads.k_m * (gamma - st.rest[i].0) - loads.k_p * (zeta - st.rest[i].1);
+            let (tau, zeta_k) = if springs {
+                let gamma = g::signed_angle(sg.t, d);
+                let zeta = g::signed_angle(pe, g::sub(m, p));
+                let zk = loads.k_p * (zeta - st.rest[i].1);
+                (-loads.k_m * (gamma - st.rest[i].0) - zk, zk)
+            } else {
+                (0.0, 0.0)
+            };
             let f = g::add(g::scale(z[3 + i], u), g::scale(tau / l, g::perp(u)));
             sum_f = g::add(sum_f, f);
-            sum_m += g::cross(pe, f) + loads.k_p * (zeta - st.rest[i].1);
+            sum_m += g::cross(pe, f) + zeta_k;
             // The segment tip carries -f.
             let fl = leg.to_local([-f[0], -f[1]]);
             let inp = [fl[0], fl[1], z[12 + i] / leg.l_c];
@@ -703,10 +730,40 @@ impl Robot {
     ) -> Result<[[f64; 3]; 5], FkError> {
         let st = self.loaded_setup(kappa);
         let z = self.fk_loaded_in(&st, kappa, loads, guess)?;
-        let segs = self.segments_at(&st, loads, &z);
+        self.load_response_at(&st, loads, &z)
+    }
+
+    /// [`Robot::load_response`] along a series: the equilibrium solved as
+    /// [`Robot::fk_loaded_warm`] does, from the state `warm` carries (the same equilibrium, at a
+    /// fraction of the cost where consecutive calls are near each other).
+    pub fn load_response_warm(
+        &self,
+        kappa: &[f64; 3],
+        loads: &Loads,
+        guess: &Pose,
+        warm: &mut LoadedWarm,
+    ) -> Result<[[f64; 3]; 5], FkError> {
+        let rest = *warm.rest.get_or_insert_with(|| self.home_joint_angles());
+        let st = self.loaded_setup_at_rest(kappa, rest);
+        let z = match self.fk_loaded_warm(kappa, loads, guess, warm) {
+            Ok(_) if !loads.is_unloaded() => warm.z.ok_or(FkError::NoSolution { reached: 0.0 })?,
+            _ => self.fk_loaded_in(&st, kappa, loads, guess)?,
+        };
+        self.load_response_at(&st, loads, &z)
+    }
+
+    /// The load response at the solved equilibrium `z`: the exact Jacobian there, and the
+    /// residual's derivatives with respect to the five parameters.
+    fn load_response_at(
+        &self,
+        st: &LoadedSetup,
+        loads: &Loads,
+        z: &VN,
+    ) -> Result<[[f64; 3]; 5], FkError> {
+        let segs = self.segments_at(st, loads, z);
         let lin = SegmentMode::Linear(&segs);
-        let f0 = self.loaded_eval(&st, loads, &z, lin).res;
-        let lu = self.loaded_jacobian(&st, loads, &z, &segs, &f0).lu();
+        let f0 = self.loaded_eval(st, loads, z, lin).res;
+        let lu = self.loaded_jacobian(st, loads, z, &segs, &f0).lu();
         let mut out = [[0.0; 3]; 5];
         for (j, o) in out.iter_mut().enumerate() {
             let mut l = *loads;
@@ -718,7 +775,7 @@ impl Robot {
                 3 => l.k_m += h,
                 _ => l.k_p += h,
             }
-            let ft = (self.loaded_eval(&st, &l, &z, lin).res - f0) / h;
+            let ft = (self.loaded_eval(st, &l, z, lin).res - f0) / h;
             let dz = lu
                 .solve(&(-ft))
                 .ok_or(FkError::NoSolution { reached: 0.0 })?;
@@ -961,5 +1018,143 @@ mod tests {
             }
         }
     }
+
+    /// A straight segment whose total bending the tendons hold at zero, under a force across
+    /// its tip, is a clamped-guided beam: two cantilevers of half its length, antisymmetric
+    /// about the middle, each under the tip force. Their large deflection is the classical
+    /// elastica of Bisshopp and Drucker (1945): at P (l/2)^2 / EI = 1 the half's tip moves
+    /// 0.30172 across and 0.05643 along (of l/2), at 2 by 0.49346 and 0.16064 (linear theory:
+    /// 1/3 and 2/3 across, nothing along).
+    #[test]
+    fn a_straight_segment_bends_as_the_classical_elastica() {
+        let r = Robot::nominal();
+        let leg = &r.legs[0];
+        let seg = Segment::new(leg, 0.0);
+        let ei = 6.5e4;
+        let half = 0.5 * leg.l_c;
+        for (alpha, across, along) in [(1.0, 0.30172, 0.05643), (2.0, 0.49346, 0.16064)] {
+            let p = alpha * ei / (half * half);
+            // The base curvature that keeps the total bending: Newton on delta(l_C), along the
+            // load from zero.
+            let mut u0 = 0.0;
+            for k in 1..=10 {
+                let pk = p * k as f64 / 10.0;
+                for _ in 0..20 {
+                    let d = seg.deflect(ei, [pk, 0.0], u0)[2];
+                    let h = 1e-9;
+                    let dd = (seg.deflect(ei, [pk, 0.0], u0 + h)[2] - d) / h;
+                    u0 -= d / dd;
+                }
+            }
+            let o = seg.deflect(ei, [p, 0.0], u0);
+            assert!(o[2].abs() < 1e-9, "{:?}", o);
+            let want = [2.0 * across * half, -2.0 * along * half];
+            // Within 0.1 % of the deflection (eight RK4 steps; 0.01 mm at alpha = 2, where the
+            // tip moves 62 mm across and 20 mm along).
+            let tol = 1e-3 * g::norm(want);
+            assert!(
+                (o[0] - want[0]).abs() < tol && (o[1] - want[1]).abs() < tol,
+                "alpha {alpha}: {:?} vs {want:?}",
+                o
+            );
+        }
+    }
+
+    /// Large loads on the whole robot against equilibria the plant (`pcr-plant`, an independent
+    /// elastica shooting with 50 RK4 steps per segment) computed for the nominal robot at whole
+    /// motor steps: 10x the validation springs (tip loads up to 16 N, four times EI / l_C^2,
+    /// the platform 30 mm from its rigid pose), 5x the validation wrench, and springs and
+    /// wrench together. The springs are relaxed at the home motor positions (176 steps) in both.
+    #[test]
+    fn large_loads_match_the_elastica_of_the_plant() {
+        let r = Robot::nominal();
+        let cases = [
+            (
+                [436.0, -49.0, 327.0],
+                Loads {
+                    k_m: 3000.0,
+                    k_p: 2000.0,
+                    ..unloaded()
+                },
+                [1.83600, -48.07076, 6.15379],
+            ),
+            (
+                [45.0, 167.0, 491.0],
+                Loads {
+                    force: [2.0, -1.5],
+                    ..unloaded()
+                },
+                [-47.71539, -32.00819, 7.22937],
+            ),
+            (
+                [267.0, 272.0, 168.0],
+                Loads {
+                    force: [1.2, -0.9],
+                    k_m: 900.0,
+                    k_p: 600.0,
+                    ..unloaded()
+                },
+                [12.42124, 6.57216, 8.88855],
+            ),
+        ];
+        for (q, loads, want) in cases {
+            let kappa: [f64; 3] = std::array::from_fn(|i| r.steps_to_kappa(i, q[i]));
+            let rigid = r.fk(&kappa).unwrap();
+            let eq = r.fk_loaded(&kappa, &loads, &rigid).unwrap();
+            let p = eq.pose;
+            assert!(
+                (p.x - want[0]).abs() < 5e-3
+                    && (p.y - want[1]).abs() < 5e-3
+                    && (p.phi_deg() - want[2]).abs() < 2e-3,
+                "{q:?}: {p:?} vs {want:?}"
+            );
+            // The load moved the platform by millimetres: the check is not the rigid model's.
+            assert!(p.position_distance(&rigid) > 2.0, "{q:?}");
+            // Warm along a path to the same point gives the same equilibrium.
+            let mut warm = LoadedWarm::default();
+            for k in 0..=10 {
+                let s = k as f64 / 10.0;
+                let kk: [f64; 3] =
+                    std::array::from_fn(|i| r.steps_to_kappa(i, 176.0 + s * (q[i] - 176.0)));
+                let g = r.fk(&kk).unwrap();
+                let hot = r.fk_loaded_warm(&kk, &loads, &g, &mut warm).unwrap();
+                if k == 10 {
+                    assert!(hot.pose.position_distance(&p) < 1e-7, "{q:?}");
+                }
+            }
+        }
+    }
+
+    /// The elastica's small-load limit is the linear compliance of beam theory along the arc
+    /// ([`Robot::tip_compliance`]), and the integration converges: 8 steps against 64.
+    #[test]
+    fn small_loads_give_the_linear_compliance() {
+        let r = Robot::nominal();
+        let ei = 6.5e4;
+        for (i, kappa) in [(0, 0.00307872), (1, 0.012), (2, -0.006)] {
+            let leg = &r.legs[i];
+            let seg = Segment::new(leg, kappa);
+            let c = r.tip_compliance(i, kappa, ei);
+            for (axis, f) in [[1e-4, 0.0], [0.0, 1e-4]].iter().enumerate() {
+                let fl = leg.to_local(*f);
+                let mut u0 = 0.0;
+                for _ in 0..10 {
+                    let d = seg.deflect(ei, fl, u0)[2];
+                    let h = 1e-10;
+                    u0 -= d / ((seg.deflect(ei, fl, u0 + h)[2] - d) / h);
+                }
+                let o = seg.deflect(ei, fl, u0);
+                let disp = leg.to_base([o[0], o[1]]);
+                for k in 0..2 {
+                    let lin = c[k][axis] * 1e-4;
+                    assert!(
+                        (disp[k] - lin).abs() < 2e-3 * c[0][0].abs().max(c[1][1].abs()) * 1e-4,
+                        "leg {i} axis {axis}: {disp:?} vs {lin}"
+                    );
+                }
+            }
+        }
+    }
+
 }
 
