@@ -2,21 +2,34 @@
 //! segments that bend under the link forces while the tendons hold their total bending, an
 //! external wrench on the platform, and springs in the passive joints.
 //!
-//! Each segment is the unloaded circular arc plus the small-load change of shape under the force
-//! F at its tip (linear beam theory along the arc): the internal moment gains
-//! `g(s) = ((r_L - r(s)) x F)_z`; the tendons keep the total bending, so the curvature changes by
-//! `(g(s) - mean g) / EI` (the tendon tension takes the mean); the tip moves by
-//! `integral of d alpha(s) n(s) ds` with `d alpha` the change of the tangent angle and `n` the
-//! normal. The tip tangent does not turn, so the rigid extension carries the displacement to
-//! M_i unchanged. This gives a 2x2 compliance C_i(kappa_i) per leg, computed by quadrature.
+//! Each segment is an inextensible planar rod (Kirchhoff elastica, large deflections) of bending
+//! stiffness EI, clamped at B_i, loaded only by the force F at its tip (the link's force through
+//! the rigid extension; a couple at the tip changes the tendon tension, never the shape). Along
+//! the arc length: `theta' = w`, `w' = ((sin theta) F_x - (cos theta) F_y) / EI` (the internal
+//! moment `EI w` changes by `-(t x F)_z`), `r' = (cos theta, sin theta)`. The tendons fix the total
+//! bending `theta(l_C) - theta(0) = -kappa l_C`; the base curvature `w(0)` (the tendon tension's
+//! share) is the segment's shooting unknown. The shape is integrated as its deviation from the
+//! unloaded circular arc (`theta = theta_arc + delta`, classical RK4 with [`STEPS`] steps, the
+//! arc's tangent tabulated exactly), so that without a load the joint M_i is the constant-curvature
+//! model's exactly and the integration error scales with the deflection. The tip tangent is the
+//! arc's (the bending is held), so the rigid extension carries the tip displacement to M_i.
+//! [`Robot::tip_compliance`] is the small-load limit of this (linear beam theory along the arc).
 //!
 //! The links are two-force members unless the joints carry springs (torques
-//! `tau_M = -k_M (gamma - gamma0)`, `tau_P = -k_P (zeta - zeta0)` on the link, relaxed at the home
-//! pose of this model); the force on the platform is
-//! `f_i = lambda_i u_i + ((tau_M + tau_P) / l_st) R(90 deg) u_i`, and the segment tip carries -f_i.
-//! The unknowns (pose, lambda, the three tip displacements) solve the loop closures, the
-//! platform equilibrium `sum f_i + F = 0`, `sum (P_i - E) x f_i + sum k_P (zeta_i - zeta0_i) + M = 0`
-//! and the compliance relations together by Newton.
+//! `tau_M = -k_M (gamma - gamma0)`, `tau_P = -k_P (zeta - zeta0)` on the link); the force on the
+//! platform is `f_i = lambda_i u_i + ((tau_M + tau_P) / l_st) R(90 deg) u_i`, and the segment tip
+//! carries -f_i. The springs' rest angles gamma0, zeta0 are those a physical robot has: the joint
+//! angles of this model, springs off and unloaded, at the home motor positions (the nominal CC IK
+//! of pose (0, 0, 0) rounded to whole steps, as the robot is homed; [`Robot::home_motor_steps`]),
+//! through the model's tendon map.
+//!
+//! The 15 unknowns (pose, lambda, the three tip displacements, the three base curvatures) solve
+//! the loop closures, the platform equilibrium `sum f_i + F = 0`,
+//! `sum (P_i - E) x f_i + sum k_P (zeta_i - zeta0_i) + M = 0`, the segments' tip displacements
+//! and their total bending together by Newton. The Jacobian is a finite difference of the
+//! residual with every segment linearised about the current point (3 x 3 per segment, by finite
+//! differences of the integration), which costs twelve segment integrations instead of
+//! forty-five. A cold solve that fails from the rigid pose follows the loads up from zero.
 //!
 //! This model is independent of the plant's elastica shooting (`pcr-plant`): it shares only the
 //! conventions of geometry.md and the physics of a loaded rod, and it is what the residual tools
@@ -24,14 +37,28 @@
 
 use crate::fk::FkError;
 use crate::ik::IkError;
+use crate::leg::Leg;
 use crate::model::Robot;
 use crate::pose::Pose;
 use nalgebra::{SMatrix, SVector};
 use pcr_robot::effects::Compliance;
 use pcr_robot::{geometry as g, Vec2};
 
-/// Quadrature intervals along a segment.
+/// Quadrature intervals along a segment (the linear compliance).
 const QUAD: usize = 96;
+
+/// Classical Runge-Kutta steps along a segment of the elastica: on the nominal robot the pose
+/// is within 1.5e-3 mm and 3e-4 deg of a 256-step integration for tip loads up to 16 N (four
+/// times EI / l_C^2; the error falls with the fourth power of the step), far below what a motion
+/// capture resolves; a test holds it.
+pub const STEPS: usize = 8;
+
+/// Unknowns of the loaded equilibrium: pose (x, y mm, phi rad), lambda_1..3 (N), the
+/// displacements of M_1..3 from the unloaded arc (x, y mm, base frame), and the deviations of
+/// the segments' base curvature from the arc's, times l_C (rad).
+const N: usize = 15;
+type VN = SVector<f64, N>;
+type MN = SMatrix<f64, N, N>;
 
 /// Loads on the robot and its stiffness.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -64,6 +91,17 @@ impl Loads {
     pub fn is_unloaded(&self) -> bool {
         self.force == [0.0; 2] && self.couple == 0.0 && self.k_m == 0.0 && self.k_p == 0.0
     }
+
+    /// Every load and spring times `s` (the continuation of a cold solve).
+    fn scaled(&self, s: f64) -> Loads {
+        Loads {
+            ei: self.ei,
+            force: [s * self.force[0], s * self.force[1]],
+            couple: s * self.couple,
+            k_m: s * self.k_m,
+            k_p: s * self.k_p,
+        }
+    }
 }
 
 /// A kineto-static equilibrium.
@@ -79,32 +117,198 @@ pub struct Equilibrium {
     pub angles: [(f64, f64); 3],
 }
 
-type V12 = SVector<f64, 12>;
+/// One segment of given curvature: its unloaded joint and tip tangent (base frame), and the
+/// arc's tangent at the integration nodes.
+struct Segment {
+    m0: Vec2,
+    t: Vec2,
+    /// Step along the arc, mm.
+    h: f64,
+    /// (cos, sin) of the arc's tangent angle pi/2 - kappa s in the leg's local frame at
+    /// s = j h / 2, j = 0 ..= 2 STEPS.
+    arc: [[f64; 2]; 2 * STEPS + 1],
+}
 
-/// What the loaded equilibrium of given curvatures keeps fixed: the unloaded joints and tip
-/// tangents, the tip compliances and the springs' rest angles.
+impl Segment {
+    fn new(leg: &Leg, kappa: f64) -> Segment {
+        let h = leg.l_c / STEPS as f64;
+        let (sd, cd) = (0.5 * kappa * h).sin_cos();
+        let mut arc = [[0.0; 2]; 2 * STEPS + 1];
+        // (cos, sin)(pi/2 - kappa s) = (sin kappa s, cos kappa s), by rotation recurrence.
+        let (mut sk, mut ck) = (0.0f64, 1.0f64);
+        for a in arc.iter_mut() {
+            *a = [sk, ck];
+            (sk, ck) = (sk * cd + ck * sd, ck * cd - sk * sd);
+        }
+        Segment {
+            m0: leg.joint_m(kappa),
+            t: leg.tangent(kappa),
+            h,
+            arc,
+        }
+    }
+
+    /// The elastica under the tip force `f` (leg's local frame, N) with its base curvature
+    /// `u0` (1/mm) above the arc's: the tip's displacement from the arc's tip (local frame, mm)
+    /// and the change of the total bending theta(l_C) - theta(0) (rad).
+    fn deflect(&self, ei: f64, f: Vec2, u0: f64) -> [f64; 3] {
+        let (fx, fy) = (f[0] / ei, f[1] / ei);
+        // State: delta = theta - theta_arc, u = delta', and the displacement (which does not
+        // feed back). (cos, sin) of delta are carried from step to step and turned by each
+        // stage's increment of delta (short series: no transcendental call on the way).
+        // The right-hand side at arc node `a` with (cos, sin) delta = `e`.
+        let rhs = |a: [f64; 2], e: [f64; 2], u: f64| -> [f64; 4] {
+            let c = a[0] * e[0] - a[1] * e[1];
+            let s = a[1] * e[0] + a[0] * e[1];
+            [u, s * fx - c * fy, c - a[0], s - a[1]]
+        };
+        let turn = |e: [f64; 2], x: f64| -> [f64; 2] {
+            let (s, c) = sin_cos_small(x);
+            [e[0] * c - e[1] * s, e[1] * c + e[0] * s]
+        };
+        let h = self.h;
+        let (mut d, mut u, mut x, mut y) = (0.0, u0, 0.0, 0.0);
+        let mut e = [1.0, 0.0];
+        for j in 0..STEPS {
+            let (a0, am, a1) = (self.arc[2 * j], self.arc[2 * j + 1], self.arc[2 * j + 2]);
+            let k1 = rhs(a0, e, u);
+            let k2 = rhs(am, turn(e, 0.5 * h * k1[0]), u + 0.5 * h * k1[1]);
+            let k3 = rhs(am, turn(e, 0.5 * h * k2[0]), u + 0.5 * h * k2[1]);
+            let k4 = rhs(a1, turn(e, h * k3[0]), u + h * k3[1]);
+            let w = h / 6.0;
+            let dd = w * (k1[0] + 2.0 * (k2[0] + k3[0]) + k4[0]);
+            d += dd;
+            e = turn(e, dd);
+            u += w * (k1[1] + 2.0 * (k2[1] + k3[1]) + k4[1]);
+            x += w * (k1[2] + 2.0 * (k2[2] + k3[2]) + k4[2]);
+            y += w * (k1[3] + 2.0 * (k2[3] + k3[3]) + k4[3]);
+        }
+        [x, y, d]
+    }
+}
+
+/// (sin x, cos x): Taylor series, to x^6 for |x| <= 0.02, to x^10 for |x| <= 0.1, to x^14 for
+/// |x| <= 0.5 (each with an error below 1e-17), the library's beyond.
+#[inline]
+fn sin_cos_small(x: f64) -> (f64, f64) {
+    let ax = x.abs();
+    if ax > 0.5 {
+        return x.sin_cos();
+    }
+    let x2 = x * x;
+    if ax <= 0.02 {
+        let s = x * (1.0 + x2 * (-1.0 / 6.0 + x2 * (1.0 / 120.0)));
+        let c = 1.0 + x2 * (-0.5 + x2 * (1.0 / 24.0 + x2 * (-1.0 / 720.0)));
+        return (s, c);
+    }
+    if ax <= 0.1 {
+        let s = x
+            * (1.0
+                + x2 * (-1.0 / 6.0
+                    + x2 * (1.0 / 120.0 + x2 * (-1.0 / 5040.0 + x2 * (1.0 / 362880.0)))));
+        let c = 1.0
+            + x2 * (-0.5
+                + x2 * (1.0 / 24.0
+                    + x2 * (-1.0 / 720.0 + x2 * (1.0 / 40320.0 + x2 * (-1.0 / 3628800.0)))));
+        return (s, c);
+    }
+    // Horner in x^2 with the Taylor coefficients 1/n!.
+    const S: [f64; 7] = [
+        1.0,
+        -1.0 / 6.0,
+        1.0 / 120.0,
+        -1.0 / 5040.0,
+        1.0 / 362880.0,
+        -1.0 / 39916800.0,
+        1.0 / 6227020800.0,
+    ];
+    const C: [f64; 8] = [
+        1.0,
+        -1.0 / 2.0,
+        1.0 / 24.0,
+        -1.0 / 720.0,
+        1.0 / 40320.0,
+        -1.0 / 3628800.0,
+        1.0 / 479001600.0,
+        -1.0 / 87178291200.0,
+    ];
+    let mut s = S[6];
+    for k in (0..6).rev() {
+        s = s * x2 + S[k];
+    }
+    let mut c = C[7];
+    for k in (0..7).rev() {
+        c = c * x2 + C[k];
+    }
+    let s = s * x;
+    (s, c)
+}
+
+/// Whether an iteration whose last steps were `step` and `last` (largest component, mm, N, rad)
+/// has converged: the error left after `step`, estimated from the contraction of the two
+/// (linear convergence: step * rate / (1 - rate)), below 1e-9, or `step` itself below 1e-11
+/// (`last` infinite: no rate known yet).
+/// The solution is then `z + step`, with no further evaluation.
+fn converged(step: f64, last: f64) -> bool {
+    if step < 1e-11 {
+        return true;
+    }
+    if !last.is_finite() {
+        return false;
+    }
+    let rate = step / last;
+    rate < 0.5 && step * rate / (1.0 - rate) < 1e-9
+}
+
+/// What the loaded equilibrium of given curvatures keeps fixed: the segments and the springs'
+/// rest angles.
 struct LoadedSetup {
-    m0: [Vec2; 3],
-    t: [Vec2; 3],
-    c: [[[f64; 2]; 2]; 3],
+    seg: [Segment; 3],
     rest: [(f64, f64); 3],
 }
-type M12 = SMatrix<f64, 12, 12>;
+
+/// The segments at one point of the iteration: their inputs (tip force, local frame, N; base
+/// curvature above the arc's, 1/mm), outputs ([`Segment::deflect`]) and the outputs'
+/// derivatives `lin[i][o][k] = d out_o / d input_k`.
+#[derive(Clone, Copy)]
+struct Segments {
+    input: [[f64; 3]; 3],
+    out: [[f64; 3]; 3],
+    lin: [[[f64; 3]; 3]; 3],
+}
+
+/// How the residual evaluates the segments: integrated, or linearised about a point.
+#[derive(Clone, Copy)]
+enum SegmentMode<'a> {
+    Exact,
+    Linear(&'a Segments),
+}
+
+/// The residual with the segments' inputs and outputs it used.
+struct Evaluation {
+    res: VN,
+    input: [[f64; 3]; 3],
+    out: [[f64; 3]; 3],
+}
 
 /// The state [`Robot::fk_loaded_warm`] carries from one call to the next along a series: the
-/// last solution and the factorised Jacobian of the chord iteration, and the springs' rest
-/// angles. One `LoadedWarm` serves one robot.
+/// last solution and the inverse Jacobian of the quasi-Newton iteration (kept current by
+/// Broyden updates), and the springs' rest angles. One `LoadedWarm` serves one robot.
 #[derive(Debug, Clone, Default)]
 pub struct LoadedWarm {
     rest: Option<[(f64, f64); 3]>,
-    z: Option<V12>,
+    z: Option<VN>,
     rigid: [f64; 3],
-    lu: Option<nalgebra::LU<f64, nalgebra::Const<12>, nalgebra::Const<12>>>,
+    /// The solution before `z`, as offsets from its rigid pose (the pose's first three).
+    before: Option<VN>,
+    inv: Option<MN>,
 }
 
 impl Robot {
-    /// The 2x2 compliance of leg i's joint M_i to a force at the segment tip (base frame,
-    /// mm/N), for curvature `kappa` and bending stiffness `ei` (N mm^2), total bending held.
+    /// The 2x2 compliance of leg i's joint M_i to a small force at the segment tip (base frame,
+    /// mm/N), for curvature `kappa` and bending stiffness `ei` (N mm^2), total bending held:
+    /// linear beam theory along the arc, the small-load limit of the elastica the loaded model
+    /// solves.
     pub fn tip_compliance(&self, i: usize, kappa: f64, ei: f64) -> [[f64; 2]; 2] {
         let leg = &self.legs[i];
         let n = QUAD;
@@ -161,11 +365,34 @@ impl Robot {
         [[cols[0][0], cols[1][0]], [cols[0][1], cols[1][1]]]
     }
 
-    /// The passive joint angles (gamma_i, zeta_i) of this model at its home configuration: the
-    /// rest angles of the joint springs.
+    /// The motor positions the robot is homed at (steps): the constant-curvature IK of pose
+    /// (0, 0, 0) of the nominal robot of geometry.md (the drawing the firmware homes by, not this
+    /// model's calibrated geometry, which may bend it by whole steps) in the working mode, with
+    /// the linear map kappa = dl / (a l_C) of this robot's actuation, rounded to whole steps
+    /// (spec/plant.md; 176 per motor for the prototype).
+    pub fn home_motor_steps(&self) -> [f64; 3] {
+        static NOMINAL_HOME_BENDING: std::sync::OnceLock<[f64; 3]> = std::sync::OnceLock::new();
+        let bending = NOMINAL_HOME_BENDING.get_or_init(|| {
+            let r = Robot::nominal();
+            std::array::from_fn(|i| r.home_kappa[i] * r.legs[i].l_c)
+        });
+        std::array::from_fn(|i| {
+            let a = self.config().legs[i].actuation.tendon_offset_mm;
+            (bending[i] * a / self.legs[i].mm_per_step).round()
+        })
+    }
+
+    /// The passive joint angles (gamma_i, zeta_i) of this model, springs off and unloaded, at
+    /// the home motor positions ([`Robot::home_motor_steps`], through the model's tendon map):
+    /// the rest angles of the joint springs.
     pub fn home_joint_angles(&self) -> [(f64, f64); 3] {
-        let home = Pose::default();
-        std::array::from_fn(|i| self.joint_angles(i, &home, self.home_kappa[i]))
+        let q = self.home_motor_steps();
+        let kappa: [f64; 3] = std::array::from_fn(|i| self.steps_to_kappa(i, q[i]));
+        let Ok(pose) = self.fk_warm(&kappa, &Pose::default()) else {
+            let home = Pose::default();
+            return std::array::from_fn(|i| self.joint_angles(i, &home, self.home_kappa[i]));
+        };
+        std::array::from_fn(|i| self.joint_angles(i, &pose, kappa[i]))
     }
 
     /// Forward kinematics with loads: the equilibrium for curvatures `kappa` (the tendons' total
@@ -176,56 +403,116 @@ impl Robot {
         loads: &Loads,
         guess: &Pose,
     ) -> Result<Equilibrium, FkError> {
-        let setup = self.loaded_setup(kappa, loads.ei);
+        let setup = self.loaded_setup(kappa);
         self.fk_loaded_in(&setup, kappa, loads, guess)
             .map(|z| self.equilibrium_of_z(&setup, &z))
     }
 
-    /// The equilibrium unknowns (pose, lambda, tip displacements) for `setup`: Newton with a
-    /// fresh finite-difference Jacobian at every step, started at the rigid FK from `guess`.
+    /// The equilibrium unknowns for `setup`: Newton with a fresh Jacobian at every step, started
+    /// at the rigid FK from `guess`; if that fails, along the loads scaled up from zero.
     fn fk_loaded_in(
         &self,
         setup: &LoadedSetup,
         kappa: &[f64; 3],
         loads: &Loads,
         guess: &Pose,
-    ) -> Result<V12, FkError> {
+    ) -> Result<VN, FkError> {
         let rigid = self.fk_warm(kappa, guess)?;
-        let mut z = V12::zeros();
+        let mut z = VN::zeros();
         z[0] = rigid.x;
         z[1] = rigid.y;
         z[2] = rigid.phi;
         if loads.is_unloaded() {
             return Ok(z);
         }
-        let residual = |z: &V12| self.loaded_residual(setup, loads, z);
-        let mut f = residual(&z);
-        for _ in 0..40 {
-            let jac = self.loaded_jacobian(setup, loads, &z, &f);
-            let Some(dz) = jac.lu().solve(&(-f)) else {
-                return Err(FkError::NoSolution { reached: 0.0 });
-            };
-            z += dz;
-            f = residual(&z);
-            if !z.iter().all(|v| v.is_finite()) || dz[0].abs() > 1e3 {
-                return Err(FkError::NoSolution { reached: 0.0 });
-            }
-            if dz.amax() < 1e-10 {
-                break;
-            }
+        if let Ok(sol) = self.loaded_newton(setup, loads, z) {
+            return Ok(sol);
         }
-        if f.amax() > 1e-6 {
-            return Err(FkError::NoSolution { reached: 0.0 });
+        let n = 8;
+        for k in 1..=n {
+            z = self.loaded_newton(setup, &loads.scaled(k as f64 / n as f64), z)?;
         }
         Ok(z)
     }
 
+    /// Newton from `z` with the Jacobian refreshed at every step while the steps are large,
+    /// quasi-Newton ([`Robot::quasi_newton`]) once they are small.
+    fn loaded_newton(&self, setup: &LoadedSetup, loads: &Loads, z: VN) -> Result<VN, FkError> {
+        let mut inv = None;
+        self.quasi_newton(setup, loads, z, &mut inv, 1e-4, 40)
+    }
+
+    /// The iteration of both solves from `z`: steps with the inverse Jacobian `inv`, kept
+    /// current by Broyden's (good) rank-one update after every step, recomputed when there is
+    /// none, when a step is larger than `fresh_above` (damped to 20 mm), or when a step does not
+    /// contract by 2x. Each step costs one integration per segment, a fresh Jacobian twelve.
+    /// Converged as [`converged`] says.
+    fn quasi_newton(
+        &self,
+        setup: &LoadedSetup,
+        loads: &Loads,
+        mut z: VN,
+        inv: &mut Option<MN>,
+        fresh_above: f64,
+        max_iter: usize,
+    ) -> Result<VN, FkError> {
+        let fail = FkError::NoSolution { reached: 0.0 };
+        let mut f = self.loaded_eval(setup, loads, &z, SegmentMode::Exact).res;
+        let mut last = f64::INFINITY;
+        for _ in 0..max_iter {
+            if !f.iter().all(|v| v.is_finite()) {
+                *inv = None;
+                return Err(fail);
+            }
+            if inv.is_none() {
+                let segs = self.segments_at(setup, loads, &z);
+                *inv = self
+                    .loaded_jacobian(setup, loads, &z, &segs, &f)
+                    .try_inverse();
+                last = f64::INFINITY;
+            }
+            let Some(h) = inv.as_mut() else {
+                return Err(fail);
+            };
+            let mut dz = -(*h * f);
+            let step = dz.amax();
+            if !step.is_finite() || step > 1e3 {
+                *inv = None;
+                return Err(fail);
+            }
+            // Damped where a step would move the pose or a joint by more than 20 mm.
+            if step > 20.0 {
+                dz *= 20.0 / step;
+            }
+            z += dz;
+            if converged(step, last) {
+                return Ok(z);
+            }
+            let f_new = self.loaded_eval(setup, loads, &z, SegmentMode::Exact).res;
+            // Broyden: H += (s - H y) s^T H / (s^T H y), s the step, y the residual's change.
+            let y = f_new - f;
+            let hy = *h * y;
+            let denom = dz.dot(&hy);
+            if denom.abs() > 1e-30 {
+                let sth = dz.transpose() * *h;
+                *h += (dz - hy) * sth / denom;
+            }
+            f = f_new;
+            if step > fresh_above || step > 0.03 * last {
+                *inv = None;
+            }
+            last = step;
+        }
+        *inv = None;
+        Err(fail)
+    }
+
     /// Forward kinematics with loads along a series: as [`Robot::fk_loaded`], but started from
-    /// the previous solution held in `warm` (its link forces and deflections, and the deflection
-    /// of its pose from the rigid one) and iterated with the Jacobian `warm` carries, refreshed
-    /// only when the iteration stops contracting (chord Newton). Converges to the same
-    /// equilibrium as [`Robot::fk_loaded`] (steps below 1e-10), at a fraction of the cost where
-    /// the configuration changes little from one call to the next.
+    /// the previous solution held in `warm` (its link forces, deflections and base curvatures,
+    /// and the deflection of its pose from the rigid one) and iterated with the Jacobian `warm`
+    /// carries, refreshed only when the iteration stops contracting (chord Newton). Converges to
+    /// the same equilibrium as [`Robot::fk_loaded`] (to an estimated 1e-9), at a fraction of the
+    /// cost where the configuration changes little from one call to the next.
     pub fn fk_loaded_warm(
         &self,
         kappa: &[f64; 3],
@@ -234,135 +521,202 @@ impl Robot {
         warm: &mut LoadedWarm,
     ) -> Result<Equilibrium, FkError> {
         let rest = *warm.rest.get_or_insert_with(|| self.home_joint_angles());
-        let setup = self.loaded_setup_at_rest(kappa, loads.ei, rest);
+        let setup = self.loaded_setup_at_rest(kappa, rest);
         let rigid = self.fk_warm(kappa, guess)?;
-        let mut z = V12::zeros();
+        let mut z = VN::zeros();
         z[0] = rigid.x;
         z[1] = rigid.y;
         z[2] = rigid.phi;
         if loads.is_unloaded() {
             return Ok(self.equilibrium_of_z(&setup, &z));
         }
-        if let Some(prev) = &warm.z {
+        // The previous solution's offsets from its rigid pose, extrapolated linearly from the
+        // one before it (rows along a path).
+        let offsets = warm.z.map(|prev| {
+            let mut o = prev;
             for k in 0..3 {
-                z[k] += prev[k] - warm.rigid[k];
+                o[k] -= warm.rigid[k];
             }
-            for k in 3..12 {
-                z[k] = prev[k];
+            o
+        });
+        if let Some(o) = offsets {
+            let mut start = o;
+            if let Some(b) = warm.before {
+                start += o - b;
+            }
+            for k in 0..3 {
+                z[k] += start[k];
+            }
+            for k in 3..N {
+                z[k] = start[k];
             }
         }
-        let residual = |z: &V12| self.loaded_residual(&setup, loads, z);
-        let mut f = residual(&z);
-        let mut last = f64::INFINITY;
-        let mut converged = false;
-        for it in 0..60 {
-            if warm.lu.is_none() || it == 40 {
-                warm.lu = Some(self.loaded_jacobian(&setup, loads, &z, &f).lu());
-                last = f64::INFINITY;
-            }
-            let Some(dz) = warm.lu.as_ref().and_then(|lu| lu.solve(&(-f))) else {
-                warm.lu = None;
-                return Err(FkError::NoSolution { reached: 0.0 });
-            };
-            let step = dz.amax();
-            if !step.is_finite() || step > 1e3 {
-                warm.lu = None;
+        let z = match self.quasi_newton(&setup, loads, z, &mut warm.inv, f64::INFINITY, 60) {
+            Ok(z) if z.iter().all(|v| v.is_finite()) => z,
+            _ => {
+                warm.inv = None;
                 warm.z = None;
+                warm.before = None;
                 return Err(FkError::NoSolution { reached: 0.0 });
             }
-            z += dz;
-            f = residual(&z);
-            if step < 1e-10 {
-                converged = true;
-                break;
-            }
-            // A chord step that contracts poorly: a fresh Jacobian for the next one.
-            if step > 0.25 * last {
-                warm.lu = None;
-            }
-            last = step;
-        }
-        if !converged || f.amax() > 1e-6 || !z.iter().all(|v| v.is_finite()) {
-            warm.lu = None;
-            warm.z = None;
-            return Err(FkError::NoSolution { reached: 0.0 });
-        }
+        };
+        warm.before = offsets;
         warm.z = Some(z);
         warm.rigid = [rigid.x, rigid.y, rigid.phi];
         Ok(self.equilibrium_of_z(&setup, &z))
     }
 
-    /// The finite-difference Jacobian of the loaded residual at `z` (`f` its value there).
-    fn loaded_jacobian(&self, setup: &LoadedSetup, loads: &Loads, z: &V12, f: &V12) -> M12 {
-        let mut jac = M12::zeros();
-        for k in 0..12 {
+    /// The segments integrated at `z`, with their derivatives (finite differences of the
+    /// integration: three more per segment).
+    fn segments_at(&self, setup: &LoadedSetup, loads: &Loads, z: &VN) -> Segments {
+        let e = self.loaded_eval(setup, loads, z, SegmentMode::Exact);
+        let mut lin = [[[0.0; 3]; 3]; 3];
+        for i in 0..3 {
+            let inp = e.input[i];
+            for k in 0..3 {
+                let h = if k < 2 {
+                    1e-6 * inp[0].abs().max(inp[1].abs()).max(1.0)
+                } else {
+                    1e-9 * (inp[2].abs() * 1e3).max(1.0)
+                };
+                let mut p = inp;
+                p[k] += h;
+                let o = setup.seg[i].deflect(loads.ei, [p[0], p[1]], p[2]);
+                for c in 0..3 {
+                    lin[i][c][k] = (o[c] - e.out[i][c]) / h;
+                }
+            }
+        }
+        Segments {
+            input: e.input,
+            out: e.out,
+            lin,
+        }
+    }
+
+    /// The finite-difference Jacobian of the loaded residual at `z` (`f` its value there), the
+    /// segments linearised (`segs`, at `z`).
+    fn loaded_jacobian(
+        &self,
+        setup: &LoadedSetup,
+        loads: &Loads,
+        z: &VN,
+        segs: &Segments,
+        f: &VN,
+    ) -> MN {
+        let mut jac = MN::zeros();
+        for k in 0..N {
             let h = 1e-7 * z[k].abs().max(if k == 2 { 1e-3 } else { 1.0 });
             let mut zp = *z;
             zp[k] += h;
-            let fp = self.loaded_residual(setup, loads, &zp);
+            let fp = self
+                .loaded_eval(setup, loads, &zp, SegmentMode::Linear(segs))
+                .res;
             jac.set_column(k, &((fp - f) / h));
         }
         jac
     }
 
     /// The equilibrium of solved unknowns `z`.
-    fn equilibrium_of_z(&self, setup: &LoadedSetup, z: &V12) -> Equilibrium {
+    fn equilibrium_of_z(&self, setup: &LoadedSetup, z: &VN) -> Equilibrium {
         let pose = Pose::new(z[0], z[1], z[2]);
-        let m: [Vec2; 3] =
-            std::array::from_fn(|i| [setup.m0[i][0] + z[6 + 2 * i], setup.m0[i][1] + z[7 + 2 * i]]);
-        self.equilibrium_of(&pose, &m, &setup.t, [z[3], z[4], z[5]])
+        let m: [Vec2; 3] = std::array::from_fn(|i| {
+            [
+                setup.seg[i].m0[0] + z[6 + 2 * i],
+                setup.seg[i].m0[1] + z[7 + 2 * i],
+            ]
+        });
+        let t: [Vec2; 3] = std::array::from_fn(|i| setup.seg[i].t);
+        self.equilibrium_of(&pose, &m, &t, [z[3], z[4], z[5]])
     }
 
-    fn loaded_setup(&self, kappa: &[f64; 3], ei: f64) -> LoadedSetup {
-        self.loaded_setup_at_rest(kappa, ei, self.home_joint_angles())
+    fn loaded_setup(&self, kappa: &[f64; 3]) -> LoadedSetup {
+        self.loaded_setup_at_rest(kappa, self.home_joint_angles())
     }
 
     /// [`Robot::loaded_setup`] with the springs' rest angles given (they depend on the robot
     /// only).
-    fn loaded_setup_at_rest(
-        &self,
-        kappa: &[f64; 3],
-        ei: f64,
-        rest: [(f64, f64); 3],
-    ) -> LoadedSetup {
+    fn loaded_setup_at_rest(&self, kappa: &[f64; 3], rest: [(f64, f64); 3]) -> LoadedSetup {
         LoadedSetup {
-            m0: std::array::from_fn(|i| self.joint_m(i, kappa[i])),
-            t: std::array::from_fn(|i| self.legs[i].tangent(kappa[i])),
-            c: std::array::from_fn(|i| self.tip_compliance(i, kappa[i], ei)),
+            seg: std::array::from_fn(|i| Segment::new(&self.legs[i], kappa[i])),
             rest,
         }
     }
 
     /// Residual of the loaded equilibrium: loop closures (mm), platform forces (N) and moment
-    /// (N, divided by the characteristic radius), compliance relations (mm).
-    fn loaded_residual(&self, st: &LoadedSetup, loads: &Loads, z: &V12) -> V12 {
-        let pose = Pose::new(z[0], z[1], z[2]);
-        let mut out = V12::zeros();
+    /// (N, divided by the characteristic radius), the joints' displacements (mm) and the
+    /// segments' change of bending (rad times l_C, mm).
+    fn loaded_eval(
+        &self,
+        st: &LoadedSetup,
+        loads: &Loads,
+        z: &VN,
+        mode: SegmentMode,
+    ) -> Evaluation {
+        let mut out = VN::zeros();
         let mut sum_f = [loads.force[0], loads.force[1]];
         let mut sum_m = loads.couple;
+        let mut input = [[0.0; 3]; 3];
+        let mut outs = [[0.0; 3]; 3];
+        let (sp, cp) = z[2].sin_cos();
+        let springs = loads.k_m != 0.0 || loads.k_p != 0.0;
         for i in 0..3 {
-            let m = [st.m0[i][0] + z[6 + 2 * i], st.m0[i][1] + z[7 + 2 * i]];
-            let p = self.joint_p(i, &pose);
+            let leg = &self.legs[i];
+            let sg = &st.seg[i];
+            let m = [sg.m0[0] + z[6 + 2 * i], sg.m0[1] + z[7 + 2 * i]];
+            // P_i - E and P_i (geometry.md eq. 5).
+            let pe = [
+                cp * leg.p_e[0] - sp * leg.p_e[1],
+                sp * leg.p_e[0] + cp * leg.p_e[1],
+            ];
+            let p = [z[0] + pe[0], z[1] + pe[1]];
             let d = g::sub(p, m);
-            let l = self.legs[i].l_st;
+            let l = leg.l_st;
             out[i] = (g::dot(d, d) - l * l) / (2.0 * l);
             let u = g::scale(1.0 / g::norm(d).max(1e-9), d);
-            let gamma = g::signed_angle(st.t[i], d);
-            let pe = g::sub(p, [pose.x, pose.y]);
-            let zeta = g::signed_angle(pe, g::sub(m, p));
-            let tau = -loads.k_m * (gamma - st.rest[i].0) - loads.k_p * (zeta - st.rest[i].1);
+            let (tau, zeta_k) = if springs {
+                let gamma = g::signed_angle(sg.t, d);
+                let zeta = g::signed_angle(pe, g::sub(m, p));
+                let zk = loads.k_p * (zeta - st.rest[i].1);
+                (-loads.k_m * (gamma - st.rest[i].0) - zk, zk)
+            } else {
+                (0.0, 0.0)
+            };
             let f = g::add(g::scale(z[3 + i], u), g::scale(tau / l, g::perp(u)));
             sum_f = g::add(sum_f, f);
-            sum_m += g::cross(pe, f) + loads.k_p * (zeta - st.rest[i].1);
-            // Compliance: the tip carries -f.
-            let c = &st.c[i];
-            out[6 + 2 * i] = z[6 + 2 * i] + (c[0][0] * f[0] + c[0][1] * f[1]);
-            out[7 + 2 * i] = z[7 + 2 * i] + (c[1][0] * f[0] + c[1][1] * f[1]);
+            sum_m += g::cross(pe, f) + zeta_k;
+            // The segment tip carries -f.
+            let fl = leg.to_local([-f[0], -f[1]]);
+            let inp = [fl[0], fl[1], z[12 + i] / leg.l_c];
+            let o = match mode {
+                SegmentMode::Exact => sg.deflect(loads.ei, fl, inp[2]),
+                SegmentMode::Linear(s) => {
+                    let dx = [
+                        inp[0] - s.input[i][0],
+                        inp[1] - s.input[i][1],
+                        inp[2] - s.input[i][2],
+                    ];
+                    std::array::from_fn(|c| {
+                        let r = &s.lin[i][c];
+                        s.out[i][c] + r[0] * dx[0] + r[1] * dx[1] + r[2] * dx[2]
+                    })
+                }
+            };
+            let disp = leg.to_base([o[0], o[1]]);
+            out[6 + 2 * i] = z[6 + 2 * i] - disp[0];
+            out[7 + 2 * i] = z[7 + 2 * i] - disp[1];
+            out[12 + i] = o[2] * leg.l_c;
+            input[i] = inp;
+            outs[i] = o;
         }
         out[3] = sum_f[0];
         out[4] = sum_f[1];
         out[5] = sum_m / self.r_char;
-        out
+        Evaluation {
+            res: out,
+            input,
+            out: outs,
+        }
     }
 
     /// The first-order response of the platform pose to the five load parameters (force x, y in
@@ -374,10 +728,42 @@ impl Robot {
         loads: &Loads,
         guess: &Pose,
     ) -> Result<[[f64; 3]; 5], FkError> {
-        let st = self.loaded_setup(kappa, loads.ei);
+        let st = self.loaded_setup(kappa);
         let z = self.fk_loaded_in(&st, kappa, loads, guess)?;
-        let f0 = self.loaded_residual(&st, loads, &z);
-        let lu = self.loaded_jacobian(&st, loads, &z, &f0).lu();
+        self.load_response_at(&st, loads, &z)
+    }
+
+    /// [`Robot::load_response`] along a series: the equilibrium solved as
+    /// [`Robot::fk_loaded_warm`] does, from the state `warm` carries (the same equilibrium, at a
+    /// fraction of the cost where consecutive calls are near each other).
+    pub fn load_response_warm(
+        &self,
+        kappa: &[f64; 3],
+        loads: &Loads,
+        guess: &Pose,
+        warm: &mut LoadedWarm,
+    ) -> Result<[[f64; 3]; 5], FkError> {
+        let rest = *warm.rest.get_or_insert_with(|| self.home_joint_angles());
+        let st = self.loaded_setup_at_rest(kappa, rest);
+        let z = match self.fk_loaded_warm(kappa, loads, guess, warm) {
+            Ok(_) if !loads.is_unloaded() => warm.z.ok_or(FkError::NoSolution { reached: 0.0 })?,
+            _ => self.fk_loaded_in(&st, kappa, loads, guess)?,
+        };
+        self.load_response_at(&st, loads, &z)
+    }
+
+    /// The load response at the solved equilibrium `z`: the exact Jacobian there, and the
+    /// residual's derivatives with respect to the five parameters.
+    fn load_response_at(
+        &self,
+        st: &LoadedSetup,
+        loads: &Loads,
+        z: &VN,
+    ) -> Result<[[f64; 3]; 5], FkError> {
+        let segs = self.segments_at(st, loads, z);
+        let lin = SegmentMode::Linear(&segs);
+        let f0 = self.loaded_eval(st, loads, z, lin).res;
+        let lu = self.loaded_jacobian(st, loads, z, &segs, &f0).lu();
         let mut out = [[0.0; 3]; 5];
         for (j, o) in out.iter_mut().enumerate() {
             let mut l = *loads;
@@ -389,7 +775,7 @@ impl Robot {
                 3 => l.k_m += h,
                 _ => l.k_p += h,
             }
-            let ft = (self.loaded_residual(&st, &l, &z) - f0) / h;
+            let ft = (self.loaded_eval(st, &l, z, lin).res - f0) / h;
             let dz = lu
                 .solve(&(-ft))
                 .ok_or(FkError::NoSolution { reached: 0.0 })?;
@@ -524,14 +910,19 @@ mod tests {
             k_p: 150.0,
             ..unloaded()
         };
-        let e = r
-            .fk_loaded(&r.home_kappa, &springs, &Pose::default())
-            .unwrap();
+        // Relaxed at the home motor positions (176 steps each: 22.098 deg, not the 22.050 deg
+        // of the exact home pose), where the loaded model is the rigid one.
+        assert_eq!(r.home_motor_steps(), [176.0; 3]);
+        let kh: [f64; 3] = std::array::from_fn(|i| r.steps_to_kappa(i, 176.0));
+        let rigid_home = r.fk(&kh).unwrap();
+        let e = r.fk_loaded(&kh, &springs, &Pose::default()).unwrap();
         assert!(
-            e.pose.x.abs() < 1e-9 && e.pose.y.abs() < 1e-9,
-            "{:?}",
-            e.pose
+            e.pose.position_distance(&rigid_home) < 1e-9 && (e.pose.phi - rigid_home.phi).abs() < 1e-11,
+            "{:?} vs {:?}",
+            e.pose,
+            rigid_home
         );
+        assert!(e.lambda.iter().all(|l| l.abs() < 1e-9), "{:?}", e.lambda);
         let target = Pose::from_mm_deg(25.0, -15.0, 4.0);
         let loads = Loads {
             force: [0.3, -0.2],
@@ -627,4 +1018,143 @@ mod tests {
             }
         }
     }
+
+    /// A straight segment whose total bending the tendons hold at zero, under a force across
+    /// its tip, is a clamped-guided beam: two cantilevers of half its length, antisymmetric
+    /// about the middle, each under the tip force. Their large deflection is the classical
+    /// elastica of Bisshopp and Drucker (1945): at P (l/2)^2 / EI = 1 the half's tip moves
+    /// 0.30172 across and 0.05643 along (of l/2), at 2 by 0.49346 and 0.16064 (linear theory:
+    /// 1/3 and 2/3 across, nothing along).
+    #[test]
+    fn a_straight_segment_bends_as_the_classical_elastica() {
+        let r = Robot::nominal();
+        let leg = &r.legs[0];
+        let seg = Segment::new(leg, 0.0);
+        let ei = 6.5e4;
+        let half = 0.5 * leg.l_c;
+        for (alpha, across, along) in [(1.0, 0.30172, 0.05643), (2.0, 0.49346, 0.16064)] {
+            let p = alpha * ei / (half * half);
+            // The base curvature that keeps the total bending: Newton on delta(l_C), along the
+            // load from zero.
+            let mut u0 = 0.0;
+            for k in 1..=10 {
+                let pk = p * k as f64 / 10.0;
+                for _ in 0..20 {
+                    let d = seg.deflect(ei, [pk, 0.0], u0)[2];
+                    let h = 1e-9;
+                    let dd = (seg.deflect(ei, [pk, 0.0], u0 + h)[2] - d) / h;
+                    u0 -= d / dd;
+                }
+            }
+            let o = seg.deflect(ei, [p, 0.0], u0);
+            assert!(o[2].abs() < 1e-9, "{:?}", o);
+            let want = [2.0 * across * half, -2.0 * along * half];
+            // Within 0.1 % of the deflection (eight RK4 steps; 0.01 mm at alpha = 2, where the
+            // tip moves 62 mm across and 20 mm along).
+            let tol = 1e-3 * g::norm(want);
+            assert!(
+                (o[0] - want[0]).abs() < tol && (o[1] - want[1]).abs() < tol,
+                "alpha {alpha}: {:?} vs {want:?}",
+                o
+            );
+        }
+    }
+
+    /// Large loads on the whole robot against equilibria the plant (`pcr-plant`, an independent
+    /// elastica shooting with 50 RK4 steps per segment) computed for the nominal robot at whole
+    /// motor steps: 10x the validation springs (tip loads up to 16 N, four times EI / l_C^2,
+    /// the platform 30 mm from its rigid pose), 5x the validation wrench, and springs and
+    /// wrench together. The springs are relaxed at the home motor positions (176 steps) in both.
+    #[test]
+    fn large_loads_match_the_elastica_of_the_plant() {
+        let r = Robot::nominal();
+        let cases = [
+            (
+                [436.0, -49.0, 327.0],
+                Loads {
+                    k_m: 3000.0,
+                    k_p: 2000.0,
+                    ..unloaded()
+                },
+                [1.83600, -48.07076, 6.15379],
+            ),
+            (
+                [45.0, 167.0, 491.0],
+                Loads {
+                    force: [2.0, -1.5],
+                    ..unloaded()
+                },
+                [-47.71539, -32.00819, 7.22937],
+            ),
+            (
+                [267.0, 272.0, 168.0],
+                Loads {
+                    force: [1.2, -0.9],
+                    k_m: 900.0,
+                    k_p: 600.0,
+                    ..unloaded()
+                },
+                [12.42124, 6.57216, 8.88855],
+            ),
+        ];
+        for (q, loads, want) in cases {
+            let kappa: [f64; 3] = std::array::from_fn(|i| r.steps_to_kappa(i, q[i]));
+            let rigid = r.fk(&kappa).unwrap();
+            let eq = r.fk_loaded(&kappa, &loads, &rigid).unwrap();
+            let p = eq.pose;
+            assert!(
+                (p.x - want[0]).abs() < 5e-3
+                    && (p.y - want[1]).abs() < 5e-3
+                    && (p.phi_deg() - want[2]).abs() < 2e-3,
+                "{q:?}: {p:?} vs {want:?}"
+            );
+            // The load moved the platform by millimetres: the check is not the rigid model's.
+            assert!(p.position_distance(&rigid) > 2.0, "{q:?}");
+            // Warm along a path to the same point gives the same equilibrium.
+            let mut warm = LoadedWarm::default();
+            for k in 0..=10 {
+                let s = k as f64 / 10.0;
+                let kk: [f64; 3] =
+                    std::array::from_fn(|i| r.steps_to_kappa(i, 176.0 + s * (q[i] - 176.0)));
+                let g = r.fk(&kk).unwrap();
+                let hot = r.fk_loaded_warm(&kk, &loads, &g, &mut warm).unwrap();
+                if k == 10 {
+                    assert!(hot.pose.position_distance(&p) < 1e-7, "{q:?}");
+                }
+            }
+        }
+    }
+
+    /// The elastica's small-load limit is the linear compliance of beam theory along the arc
+    /// ([`Robot::tip_compliance`]), and the integration converges: 8 steps against 64.
+    #[test]
+    fn small_loads_give_the_linear_compliance() {
+        let r = Robot::nominal();
+        let ei = 6.5e4;
+        for (i, kappa) in [(0, 0.00307872), (1, 0.012), (2, -0.006)] {
+            let leg = &r.legs[i];
+            let seg = Segment::new(leg, kappa);
+            let c = r.tip_compliance(i, kappa, ei);
+            for (axis, f) in [[1e-4, 0.0], [0.0, 1e-4]].iter().enumerate() {
+                let fl = leg.to_local(*f);
+                let mut u0 = 0.0;
+                for _ in 0..10 {
+                    let d = seg.deflect(ei, fl, u0)[2];
+                    let h = 1e-10;
+                    u0 -= d / ((seg.deflect(ei, fl, u0 + h)[2] - d) / h);
+                }
+                let o = seg.deflect(ei, fl, u0);
+                let disp = leg.to_base([o[0], o[1]]);
+                for k in 0..2 {
+                    let lin = c[k][axis] * 1e-4;
+                    assert!(
+                        (disp[k] - lin).abs() < 2e-3 * c[0][0].abs().max(c[1][1].abs()) * 1e-4,
+                        "leg {i} axis {axis}: {disp:?} vs {lin}"
+                    );
+                }
+            }
+        }
+    }
+
 }
+

@@ -229,6 +229,48 @@ impl<'a> Context<'a> {
             .unwrap_or([[0.0; 3]; 5])
     }
 
+    /// The load responses of the rows `idx` (in row order), solved: in chunks of consecutive
+    /// rows of one series, each warm-started along the chunk
+    /// ([`pcr_kinematics::Robot::load_response_warm`]), the chunks in parallel.
+    fn load_responses_warm(
+        &self,
+        idx: &[usize],
+        loads: &pcr_kinematics::statics::Loads,
+    ) -> Vec<[[f64; 3]; 5]> {
+        const CHUNK: usize = 256;
+        let mut chunks: Vec<&[usize]> = Vec::new();
+        let mut start = 0;
+        for k in 1..=idx.len() {
+            if k == idx.len()
+                || k - start == CHUNK
+                || self.rows[idx[k]].s != self.rows[idx[start]].s
+            {
+                chunks.push(&idx[start..k]);
+                start = k;
+            }
+        }
+        let parts: Vec<Vec<[[f64; 3]; 5]>> = chunks
+            .par_iter()
+            .map(|c| {
+                let mut warm = pcr_kinematics::statics::LoadedWarm::default();
+                c.iter()
+                    .map(|&i| {
+                        let p = self.pred(&self.rows[i]);
+                        let Some(pose) = p.pose else {
+                            return [[0.0; 3]; 5];
+                        };
+                        let guess = pcr_kinematics::Pose::new(pose[0], pose[1], pose[2]);
+                        self.model
+                            .robot
+                            .load_response_warm(&p.kappa, loads, &guess, &mut warm)
+                            .unwrap_or([[0.0; 3]; 5])
+                    })
+                    .collect()
+            })
+            .collect();
+        parts.concat()
+    }
+
     /// The load responses solved at anchor rows (the first row of every series and every row
     /// whose segments' bending differs from the last anchor's by more than
     /// [`ANCHOR_BENDING_RAD`]) and interpolated between consecutive anchors along the
@@ -309,10 +351,7 @@ impl<'a> Context<'a> {
         let mut anchors = 0usize;
         let mut scale = [0.0f64; 5];
         let idx: Vec<usize> = (0..n).filter(|&i| anchor[i]).collect();
-        let solved_at: Vec<[[f64; 3]; 5]> = idx
-            .par_iter()
-            .map(|&i| self.load_response_at(i, loads))
-            .collect();
+        let solved_at = self.load_responses_warm(&idx, loads);
         for (&i, r) in idx.iter().zip(solved_at) {
             out[i] = r;
             for (sc, r) in scale.iter_mut().zip(&out[i]) {
@@ -343,10 +382,7 @@ impl<'a> Context<'a> {
             .filter(|&i| !anchor[i] && self.pred(&self.rows[i]).pose.is_some())
             .step_by(CHECK_EVERY)
             .collect();
-        let exact: Vec<[[f64; 3]; 5]> = sample
-            .par_iter()
-            .map(|&i| self.load_response_at(i, loads))
-            .collect();
+        let exact = self.load_responses_warm(&sample, loads);
         for (&i, e) in sample.iter().zip(exact) {
             solved += 1;
             checked += 1;

@@ -1,6 +1,7 @@
 //! The kineto-static compliance `joint_springs` and `external_load` share: the robot file's
 //! `[effects.compliance]` (the segments bend under the link forces, loaded by springs in the
-//! passive joints and by a wrench on the platform; `kinematics/src/statics.rs`), its part of
+//! passive joints and by a wrench on the platform, the segments Kirchhoff elastica;
+//! `kinematics/src/statics.rs`), its part of
 //! the prediction, and the fit of some of its five load parameters with the calibration
 //! parameters.
 

@@ -1,5 +1,6 @@
 //! `joint_springs`: compliance under the coupling forces. Springs in the passive joints,
-//! relaxed at home, bend the segments through the link forces (the kineto-static model of
+//! relaxed where the robot was homed (the joint angles at the home motor positions), bend the
+//! segments, large elastica deflections, through the link forces (the kineto-static model of
 //! [`super::compliance`], `k_M`, `k_P` of `[effects.compliance]`); the chain's IK is the loaded
 //! model's.
 
