@@ -171,8 +171,11 @@ fn align_series(ctx: &Context, si: usize) -> Timing {
     // Coarse scan of the total SSE, then a finer one around its minimum.
     let lo = (-SCAN_BEFORE).min(declared - SCAN_BEFORE);
     let n = ((declared + SCAN_AFTER - lo) / SCAN_STEP).round() as usize;
-    let total_at =
-        |d: f64| -> f64 { per_block_sse(ctx, si, &rows, d - delay_now, &blocks, None).iter().sum() };
+    let total_at = |d: f64| -> f64 {
+        per_block_sse(ctx, si, &rows, d - delay_now, &blocks, None)
+            .iter()
+            .sum()
+    };
     let argmin = |pts: Vec<(f64, f64)>, or: f64| {
         pts.iter()
             .min_by(|a, b| a.1.total_cmp(&b.1))

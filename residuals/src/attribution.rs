@@ -369,11 +369,14 @@ struct Search<'a> {
     effect_plots: Vec<(String, Vec<(f64, f64)>)>,
     /// The search as it was before the first effect taken in provisionally, and the effects
     /// taken in so (round, name, why).
-    provisional: Option<(Snapshot<'a>, Vec<(usize, String, String)>)>,
+    provisional: Option<(Snapshot<'a>, Vec<Taken>)>,
     /// Candidates not to put into the model again in a round (round, name): taken in
     /// provisionally there and gone back on.
     banned: Vec<(usize, String, String)>,
 }
+
+/// An effect taken in provisionally: round, name, why its geometry leaves the drawing.
+type Taken = (usize, String, String);
 
 /// The state of a [`Search`] to go back to.
 struct Snapshot<'a> {
@@ -523,16 +526,12 @@ impl<'a> Search<'a> {
             .into_iter()
             .filter(|(f, s)| near_miss(f.name, s, set.opts) && s.held_out_rms_after_mm < recal_best)
             .collect();
-        let mut tried = 0;
         for ((f, s), judged_whole) in sure
             .into_iter()
             .map(|x| (x, false))
             .chain(near.into_iter().map(|x| (x, true)))
+            .take(MAX_CONFIRMATIONS)
         {
-            if tried == MAX_CONFIRMATIONS {
-                break;
-            }
-            tried += 1;
             let name = f.name;
             let whole = judged_whole.then_some(n_candidates);
             match self.confirm(round, f, &s, &test, set, whole) {
@@ -772,11 +771,8 @@ impl<'a> Search<'a> {
 /// refits every effect together.
 fn near_miss(name: &str, s: &Score, opts: &Options) -> bool {
     let physical = effects::named(name).is_some_and(|e| e.role() == Role::Physical);
-    let share = s.effect_mm.max(0.0).powi(2)
-        / (s.held_out_rms_before_mm.powi(2)).max(1e-300);
-    physical
-        && s.effect_mm >= opts.min_effect_mm
-        && (s.p_value < 0.05 || share >= 0.1)
+    let share = s.effect_mm.max(0.0).powi(2) / (s.held_out_rms_before_mm.powi(2)).max(1e-300);
+    physical && s.effect_mm >= opts.min_effect_mm && (s.p_value < 0.05 || share >= 0.1)
 }
 
 /// Whether the full model `after` (a near miss put in, everything refitted) earns its place
@@ -798,14 +794,21 @@ fn judge_full_model(
     let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
     let gain = (ma - mb).max(0.0).sqrt();
     let excess = ma - set.noise_ms;
-    let share = if excess > 0.0 { (ma - mb) / excess } else { 0.0 };
+    let share = if excess > 0.0 {
+        (ma - mb) / excess
+    } else {
+        0.0
+    };
     let alpha = set.opts.alpha / n_candidates.max(1) as f64;
     let mut why = Vec::new();
     if p >= alpha {
         why.push(format!("p = {p:.2e} >= {alpha:.1e}"));
     }
     if gain < set.opts.min_effect_mm {
-        why.push(format!("held-out gain {gain:.4} mm < {} mm", set.opts.min_effect_mm));
+        why.push(format!(
+            "held-out gain {gain:.4} mm < {} mm",
+            set.opts.min_effect_mm
+        ));
     }
     if share < MIN_SHARE {
         why.push(format!(

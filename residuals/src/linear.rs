@@ -43,7 +43,11 @@ pub fn solve_with_prior(
         return None;
     }
     // Per time block (the clusters of the standard errors below), then summed.
-    let nb = idx.iter().map(|&i| ctx.rows[i].block + 1).max().unwrap_or(1);
+    let nb = idx
+        .iter()
+        .map(|&i| ctx.rows[i].block + 1)
+        .max()
+        .unwrap_or(1);
     let mut per_block: Vec<Option<(DMatrix<f64>, DVector<f64>)>> = vec![None; nb];
     let mut c: Columns = vec![[0.0; 3]; n];
     let mut rr = 0.0;
@@ -94,7 +98,11 @@ pub fn solve_joint(
         return None;
     }
     let gram = table.gram(ctx, idx);
-    let nb = idx.iter().map(|&i| ctx.rows[i].block + 1).max().unwrap_or(1);
+    let nb = idx
+        .iter()
+        .map(|&i| ctx.rows[i].block + 1)
+        .max()
+        .unwrap_or(1);
     // Per block: E^T E, E^T G, E^T r, G^T r.
     struct Acc {
         ee: DMatrix<f64>,

@@ -202,7 +202,11 @@ impl NuisanceTable {
             return g;
         }
         let n = self.nui.n;
-        let nb = idx.iter().map(|&i| ctx.rows[i].block + 1).max().unwrap_or(1);
+        let nb = idx
+            .iter()
+            .map(|&i| ctx.rows[i].block + 1)
+            .max()
+            .unwrap_or(1);
         let mut per: Vec<Option<nalgebra::DMatrix<f64>>> = vec![None; nb];
         for &i in idx {
             let g = &self.cols[i];

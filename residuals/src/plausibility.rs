@@ -18,7 +18,9 @@ pub(crate) fn unphysical(
     drawing: &RobotConfig,
     opts: &Options,
 ) -> Option<String> {
-    let mut why: Vec<String> = leaves_drawing(c, current, drawing, opts).into_iter().collect();
+    let mut why: Vec<String> = leaves_drawing(c, current, drawing, opts)
+        .into_iter()
+        .collect();
     why.extend(effects_unphysical(c, opts));
     (!why.is_empty()).then(|| format!("unphysical: {}", why.join(", ")))
 }

@@ -291,14 +291,26 @@ mod tests {
     fn the_ratio_test_sees_an_improvement_every_block_shows_whatever_its_size() {
         // Every held-out block better by a factor of 2 to 20: the differences range over three
         // orders of magnitude, the logarithms of the ratios do not.
-        let a = [0.02, 0.03, 0.05, 1.0, 8.0, 0.04, 0.02, 30.0, 0.03, 0.05, 100.0];
-        let b = [0.01, 0.01, 0.02, 0.1, 0.4, 0.02, 0.01, 1.5, 0.01, 0.02, 500.0];
-        let held = [true, true, true, true, true, true, true, true, true, true, false];
-        assert!(paired_p(&a, &b, &held) > 0.05, "{}", paired_p(&a, &b, &held));
+        let a = [
+            0.02, 0.03, 0.05, 1.0, 8.0, 0.04, 0.02, 30.0, 0.03, 0.05, 100.0,
+        ];
+        let b = [
+            0.01, 0.01, 0.02, 0.1, 0.4, 0.02, 0.01, 1.5, 0.01, 0.02, 500.0,
+        ];
+        let held = [
+            true, true, true, true, true, true, true, true, true, true, false,
+        ];
+        assert!(
+            paired_p(&a, &b, &held) > 0.05,
+            "{}",
+            paired_p(&a, &b, &held)
+        );
         assert!(paired_ratio_p(&a, &b, &held) < 1e-3);
         assert!(paired_ratio_p(&b, &a, &held) > 0.99);
         // A candidate that fits the noise: ratios about 1 either way.
-        let c = [0.021, 0.029, 0.051, 1.01, 7.9, 0.041, 0.0199, 30.2, 0.0301, 0.049, 1.0];
+        let c = [
+            0.021, 0.029, 0.051, 1.01, 7.9, 0.041, 0.0199, 30.2, 0.0301, 0.049, 1.0,
+        ];
         assert!(paired_ratio_p(&a, &c, &held) > 0.01);
     }
 
