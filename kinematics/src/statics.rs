@@ -151,6 +151,9 @@ impl Segment {
     /// The elastica under the tip force `f` (leg's local frame, N) with its base curvature
     /// `u0` (1/mm) above the arc's: the tip's displacement from the arc's tip (local frame, mm)
     /// and the change of the total bending theta(l_C) - theta(0) (rad).
+    /// (The solver integrates the three segments together, [`deflect3`], with the same
+    /// operations; this is the reference the tests hold that to.)
+    #[cfg_attr(not(test), allow(dead_code))]
     fn deflect(&self, ei: f64, f: Vec2, u0: f64) -> [f64; 3] {
         let (fx, fy) = (f[0] / ei, f[1] / ei);
         // State: delta = theta - theta_arc, u = delta', and the displacement (which does not
@@ -184,6 +187,249 @@ impl Segment {
             y += w * (k1[3] + 2.0 * (k2[3] + k3[3]) + k4[3]);
         }
         [x, y, d]
+    }
+}
+
+/// [`Segment::deflect`] of the three segments at once, in lockstep (the three integrations are
+/// independent chains the processor overlaps; the same operations, bit-for-bit the same
+/// results).
+fn deflect3(seg: &[Segment; 3], ei: f64, f: [Vec2; 3], u0: [f64; 3]) -> [[f64; 3]; 3] {
+    let fx: [f64; 3] = std::array::from_fn(|i| f[i][0] / ei);
+    let fy: [f64; 3] = std::array::from_fn(|i| f[i][1] / ei);
+    let rhs = |i: usize, a: [f64; 2], e: [f64; 2], u: f64| -> [f64; 4] {
+        let c = a[0] * e[0] - a[1] * e[1];
+        let s = a[1] * e[0] + a[0] * e[1];
+        [u, s * fx[i] - c * fy[i], c - a[0], s - a[1]]
+    };
+    let turn = |e: [f64; 2], x: f64| -> [f64; 2] {
+        let (s, c) = sin_cos_small(x);
+        [e[0] * c - e[1] * s, e[1] * c + e[0] * s]
+    };
+    let h: [f64; 3] = std::array::from_fn(|i| seg[i].h);
+    let mut d = [0.0f64; 3];
+    let mut u = u0;
+    let mut x = [0.0f64; 3];
+    let mut y = [0.0f64; 3];
+    let mut e = [[1.0, 0.0]; 3];
+    for j in 0..STEPS {
+        let a0: [[f64; 2]; 3] = std::array::from_fn(|i| seg[i].arc[2 * j]);
+        let am: [[f64; 2]; 3] = std::array::from_fn(|i| seg[i].arc[2 * j + 1]);
+        let a1: [[f64; 2]; 3] = std::array::from_fn(|i| seg[i].arc[2 * j + 2]);
+        let k1: [[f64; 4]; 3] = std::array::from_fn(|i| rhs(i, a0[i], e[i], u[i]));
+        let k2: [[f64; 4]; 3] = std::array::from_fn(|i| {
+            rhs(
+                i,
+                am[i],
+                turn(e[i], 0.5 * h[i] * k1[i][0]),
+                u[i] + 0.5 * h[i] * k1[i][1],
+            )
+        });
+        let k3: [[f64; 4]; 3] = std::array::from_fn(|i| {
+            rhs(
+                i,
+                am[i],
+                turn(e[i], 0.5 * h[i] * k2[i][0]),
+                u[i] + 0.5 * h[i] * k2[i][1],
+            )
+        });
+        let k4: [[f64; 4]; 3] = std::array::from_fn(|i| {
+            rhs(i, a1[i], turn(e[i], h[i] * k3[i][0]), u[i] + h[i] * k3[i][1])
+        });
+        for i in 0..3 {
+            let w = h[i] / 6.0;
+            let (k1, k2, k3, k4) = (k1[i], k2[i], k3[i], k4[i]);
+            let dd = w * (k1[0] + 2.0 * (k2[0] + k3[0]) + k4[0]);
+            d[i] += dd;
+            e[i] = turn(e[i], dd);
+            u[i] += w * (k1[1] + 2.0 * (k2[1] + k3[1]) + k4[1]);
+            x[i] += w * (k1[2] + 2.0 * (k2[2] + k3[2]) + k4[2]);
+            y[i] += w * (k1[3] + 2.0 * (k2[3] + k3[3]) + k4[3]);
+        }
+    }
+    std::array::from_fn(|i| [x[i], y[i], d[i]])
+}
+
+/// [`Segment::deflect_jac`] of the three segments at once, in lockstep (as [`deflect3`]; the
+/// same operations, bit-for-bit the same results).
+#[allow(clippy::type_complexity)]
+fn deflect_jac3(
+    seg: &[Segment; 3],
+    ei: f64,
+    f: [Vec2; 3],
+    u0: [f64; 3],
+) -> ([[f64; 3]; 3], [[[f64; 3]; 3]; 3]) {
+    let fx: [f64; 3] = std::array::from_fn(|i| f[i][0] / ei);
+    let fy: [f64; 3] = std::array::from_fn(|i| f[i][1] / ei);
+    let g = 1.0 / ei;
+    let rhs = |i: usize, a: [f64; 2], e: [f64; 2], u: f64| -> ([f64; 4], f64, f64) {
+        let c = a[0] * e[0] - a[1] * e[1];
+        let s = a[1] * e[0] + a[0] * e[1];
+        ([u, s * fx[i] - c * fy[i], c - a[0], s - a[1]], c, s)
+    };
+    let var = |i: usize, t: &[[f64; 2]; 3], c: f64, s: f64| -> [[f64; 4]; 3] {
+        let m = c * fx[i] + s * fy[i];
+        [
+            [t[0][1], m * t[0][0] + s * g, -s * t[0][0], c * t[0][0]],
+            [t[1][1], m * t[1][0] - c * g, -s * t[1][0], c * t[1][0]],
+            [t[2][1], m * t[2][0], -s * t[2][0], c * t[2][0]],
+        ]
+    };
+    let turn = |e: [f64; 2], x: f64| -> [f64; 2] {
+        let (s, c) = sin_cos_small(x);
+        [e[0] * c - e[1] * s, e[1] * c + e[0] * s]
+    };
+    let adv = |t: &[[f64; 2]; 3], k: &[[f64; 4]; 3], x: f64| -> [[f64; 2]; 3] {
+        std::array::from_fn(|i| [t[i][0] + x * k[i][0], t[i][1] + x * k[i][1]])
+    };
+    let h: [f64; 3] = std::array::from_fn(|i| seg[i].h);
+    let mut d = [0.0f64; 3];
+    let mut u = u0;
+    let mut x = [0.0f64; 3];
+    let mut y = [0.0f64; 3];
+    let mut e = [[1.0, 0.0]; 3];
+    let mut ts = [[[0.0f64; 2]; 3]; 3];
+    for t in ts.iter_mut() {
+        t[2][1] = 1.0;
+    }
+    let mut tp = [[[0.0f64; 2]; 3]; 3];
+    for j in 0..STEPS {
+        let a0: [[f64; 2]; 3] = std::array::from_fn(|i| seg[i].arc[2 * j]);
+        let am: [[f64; 2]; 3] = std::array::from_fn(|i| seg[i].arc[2 * j + 1]);
+        let a1: [[f64; 2]; 3] = std::array::from_fn(|i| seg[i].arc[2 * j + 2]);
+        let r1: [_; 3] = std::array::from_fn(|i| rhs(i, a0[i], e[i], u[i]));
+        let v1: [_; 3] = std::array::from_fn(|i| var(i, &ts[i], r1[i].1, r1[i].2));
+        let r2: [_; 3] = std::array::from_fn(|i| {
+            let k1 = r1[i].0;
+            rhs(
+                i,
+                am[i],
+                turn(e[i], 0.5 * h[i] * k1[0]),
+                u[i] + 0.5 * h[i] * k1[1],
+            )
+        });
+        let v2: [_; 3] = std::array::from_fn(|i| {
+            var(i, &adv(&ts[i], &v1[i], 0.5 * h[i]), r2[i].1, r2[i].2)
+        });
+        let r3: [_; 3] = std::array::from_fn(|i| {
+            let k2 = r2[i].0;
+            rhs(
+                i,
+                am[i],
+                turn(e[i], 0.5 * h[i] * k2[0]),
+                u[i] + 0.5 * h[i] * k2[1],
+            )
+        });
+        let v3: [_; 3] = std::array::from_fn(|i| {
+            var(i, &adv(&ts[i], &v2[i], 0.5 * h[i]), r3[i].1, r3[i].2)
+        });
+        let r4: [_; 3] = std::array::from_fn(|i| {
+            let k3 = r3[i].0;
+            rhs(i, a1[i], turn(e[i], h[i] * k3[0]), u[i] + h[i] * k3[1])
+        });
+        let v4: [_; 3] =
+            std::array::from_fn(|i| var(i, &adv(&ts[i], &v3[i], h[i]), r4[i].1, r4[i].2));
+        for i in 0..3 {
+            let w = h[i] / 6.0;
+            let (k1, k2, k3, k4) = (r1[i].0, r2[i].0, r3[i].0, r4[i].0);
+            let dd = w * (k1[0] + 2.0 * (k2[0] + k3[0]) + k4[0]);
+            d[i] += dd;
+            e[i] = turn(e[i], dd);
+            u[i] += w * (k1[1] + 2.0 * (k2[1] + k3[1]) + k4[1]);
+            x[i] += w * (k1[2] + 2.0 * (k2[2] + k3[2]) + k4[2]);
+            y[i] += w * (k1[3] + 2.0 * (k2[3] + k3[3]) + k4[3]);
+            let (v1, v2, v3, v4) = (&v1[i], &v2[i], &v3[i], &v4[i]);
+            for q in 0..3 {
+                let inc = |c: usize| w * (v1[q][c] + 2.0 * (v2[q][c] + v3[q][c]) + v4[q][c]);
+                ts[i][q][0] += inc(0);
+                ts[i][q][1] += inc(1);
+                tp[i][q][0] += inc(2);
+                tp[i][q][1] += inc(3);
+            }
+        }
+    }
+    let out = std::array::from_fn(|i| [x[i], y[i], d[i]]);
+    let jac = std::array::from_fn(|i| {
+        let (ts, tp) = (&ts[i], &tp[i]);
+        [
+            [tp[0][0], tp[1][0], tp[2][0]],
+            [tp[0][1], tp[1][1], tp[2][1]],
+            [ts[0][0], ts[1][0], ts[2][0]],
+        ]
+    });
+    (out, jac)
+}
+
+impl Segment {
+    /// [`Segment::deflect`] with its derivatives `jac[o][k] = d out_o / d (f_x, f_y, u0)_k`: the
+    /// variational equations of the elastica integrated alongside, stage by stage, so that they
+    /// are the exact derivatives of the discrete integration (`out` is bit-for-bit
+    /// [`Segment::deflect`]'s).
+    #[cfg_attr(not(test), allow(dead_code))]
+    fn deflect_jac(&self, ei: f64, f: Vec2, u0: f64) -> ([f64; 3], [[f64; 3]; 3]) {
+        let (fx, fy) = (f[0] / ei, f[1] / ei);
+        let g = 1.0 / ei;
+        // The right-hand side at arc node `a` with (cos, sin) delta = `e`, and (cos, sin) of
+        // the tangent angle there.
+        let rhs = |a: [f64; 2], e: [f64; 2], u: f64| -> ([f64; 4], f64, f64) {
+            let c = a[0] * e[0] - a[1] * e[1];
+            let s = a[1] * e[0] + a[0] * e[1];
+            ([u, s * fx - c * fy, c - a[0], s - a[1]], c, s)
+        };
+        // The tangent's right-hand side for each input k: (d delta, d u) = t[k], the tangent
+        // angle (c, s) of the stage; the loads' own derivatives (1/EI along f_x, f_y).
+        let var = |t: &[[f64; 2]; 3], c: f64, s: f64| -> [[f64; 4]; 3] {
+            let m = c * fx + s * fy;
+            [
+                [t[0][1], m * t[0][0] + s * g, -s * t[0][0], c * t[0][0]],
+                [t[1][1], m * t[1][0] - c * g, -s * t[1][0], c * t[1][0]],
+                [t[2][1], m * t[2][0], -s * t[2][0], c * t[2][0]],
+            ]
+        };
+        let turn = |e: [f64; 2], x: f64| -> [f64; 2] {
+            let (s, c) = sin_cos_small(x);
+            [e[0] * c - e[1] * s, e[1] * c + e[0] * s]
+        };
+        let adv = |t: &[[f64; 2]; 3], k: &[[f64; 4]; 3], x: f64| -> [[f64; 2]; 3] {
+            std::array::from_fn(|i| [t[i][0] + x * k[i][0], t[i][1] + x * k[i][1]])
+        };
+        let h = self.h;
+        let (mut d, mut u, mut x, mut y) = (0.0, u0, 0.0, 0.0);
+        let mut e = [1.0, 0.0];
+        // Tangent state per input: d delta, d u, d x, d y.
+        let mut ts = [[0.0f64; 2]; 3];
+        ts[2][1] = 1.0;
+        let mut tp = [[0.0f64; 2]; 3];
+        for j in 0..STEPS {
+            let (a0, am, a1) = (self.arc[2 * j], self.arc[2 * j + 1], self.arc[2 * j + 2]);
+            let (k1, c1, s1) = rhs(a0, e, u);
+            let v1 = var(&ts, c1, s1);
+            let (k2, c2, s2) = rhs(am, turn(e, 0.5 * h * k1[0]), u + 0.5 * h * k1[1]);
+            let v2 = var(&adv(&ts, &v1, 0.5 * h), c2, s2);
+            let (k3, c3, s3) = rhs(am, turn(e, 0.5 * h * k2[0]), u + 0.5 * h * k2[1]);
+            let v3 = var(&adv(&ts, &v2, 0.5 * h), c3, s3);
+            let (k4, c4, s4) = rhs(a1, turn(e, h * k3[0]), u + h * k3[1]);
+            let v4 = var(&adv(&ts, &v3, h), c4, s4);
+            let w = h / 6.0;
+            let dd = w * (k1[0] + 2.0 * (k2[0] + k3[0]) + k4[0]);
+            d += dd;
+            e = turn(e, dd);
+            u += w * (k1[1] + 2.0 * (k2[1] + k3[1]) + k4[1]);
+            x += w * (k1[2] + 2.0 * (k2[2] + k3[2]) + k4[2]);
+            y += w * (k1[3] + 2.0 * (k2[3] + k3[3]) + k4[3]);
+            for i in 0..3 {
+                let inc = |c: usize| w * (v1[i][c] + 2.0 * (v2[i][c] + v3[i][c]) + v4[i][c]);
+                ts[i][0] += inc(0);
+                ts[i][1] += inc(1);
+                tp[i][0] += inc(2);
+                tp[i][1] += inc(3);
+            }
+        }
+        let jac = [
+            [tp[0][0], tp[1][0], tp[2][0]],
+            [tp[0][1], tp[1][1], tp[2][1]],
+            [ts[0][0], ts[1][0], ts[2][0]],
+        ];
+        ([x, y, d], jac)
     }
 }
 
@@ -277,10 +523,38 @@ struct Segments {
     lin: [[[f64; 3]; 3]; 3],
 }
 
+impl Segments {
+    /// Segment i's output for `input`, linearised.
+    fn linear(&self, i: usize, input: &[f64; 3]) -> [f64; 3] {
+        let dx = [
+            input[0] - self.input[i][0],
+            input[1] - self.input[i][1],
+            input[2] - self.input[i][2],
+        ];
+        std::array::from_fn(|c| {
+            let r = &self.lin[i][c];
+            self.out[i][c] + r[0] * dx[0] + r[1] * dx[1] + r[2] * dx[2]
+        })
+    }
+}
+
+/// One leg's share of the loaded residual: its loop closure (mm), its force on the platform
+/// (N) and moment about E (N mm, spring at P_i included), its segment's input and output.
+#[derive(Clone, Copy)]
+struct LegTerms {
+    closure: f64,
+    f: Vec2,
+    moment: f64,
+    input: [f64; 3],
+    out: [f64; 3],
+}
+
 /// How the residual evaluates the segments: integrated, or linearised about a point.
 #[derive(Clone, Copy)]
 enum SegmentMode<'a> {
     Exact,
+    /// Integrated, with the derivatives ([`Segment::deflect_jac`]).
+    Variational,
     Linear(&'a Segments),
 }
 
@@ -289,6 +563,8 @@ struct Evaluation {
     res: VN,
     input: [[f64; 3]; 3],
     out: [[f64; 3]; 3],
+    /// The segments' derivatives ([`SegmentMode::Variational`] only).
+    lin: [[[f64; 3]; 3]; 3],
 }
 
 /// The state [`Robot::fk_loaded_warm`] carries from one call to the next along a series: the
@@ -474,7 +750,9 @@ impl Robot {
             let Some(h) = inv.as_mut() else {
                 return Err(fail);
             };
-            let mut dz = -(*h * f);
+            // In place (no copy of the 15 x 15 matrix): dz = -H f.
+            let mut dz = VN::zeros();
+            dz.gemv(-1.0, &*h, &f, 0.0);
             let step = dz.amax();
             if !step.is_finite() || step > 1e3 {
                 *inv = None;
@@ -491,11 +769,13 @@ impl Robot {
             let f_new = self.loaded_eval(setup, loads, &z, SegmentMode::Exact).res;
             // Broyden: H += (s - H y) s^T H / (s^T H y), s the step, y the residual's change.
             let y = f_new - f;
-            let hy = *h * y;
+            let mut hy = VN::zeros();
+            hy.gemv(1.0, &*h, &y, 0.0);
             let denom = dz.dot(&hy);
             if denom.abs() > 1e-30 {
-                let sth = dz.transpose() * *h;
-                *h += (dz - hy) * sth / denom;
+                // In place: H += (s - H y) (H^T s)^T / denom.
+                let hts = h.tr_mul(&dz);
+                h.ger(1.0 / denom, &(dz - hy), &hts, 1.0);
             }
             f = f_new;
             if step > fresh_above || step > 0.03 * last {
@@ -522,13 +802,26 @@ impl Robot {
     ) -> Result<Equilibrium, FkError> {
         let rest = *warm.rest.get_or_insert_with(|| self.home_joint_angles());
         let setup = self.loaded_setup_at_rest(kappa, rest);
+        let z = self.fk_loaded_warm_in(&setup, kappa, loads, guess, warm)?;
+        Ok(self.equilibrium_of_z(&setup, &z))
+    }
+
+    /// [`Robot::fk_loaded_warm`]'s unknowns for `setup`.
+    fn fk_loaded_warm_in(
+        &self,
+        setup: &LoadedSetup,
+        kappa: &[f64; 3],
+        loads: &Loads,
+        guess: &Pose,
+        warm: &mut LoadedWarm,
+    ) -> Result<VN, FkError> {
         let rigid = self.fk_warm(kappa, guess)?;
         let mut z = VN::zeros();
         z[0] = rigid.x;
         z[1] = rigid.y;
         z[2] = rigid.phi;
         if loads.is_unloaded() {
-            return Ok(self.equilibrium_of_z(&setup, &z));
+            return Ok(z);
         }
         // The previous solution's offsets from its rigid pose, extrapolated linearly from the
         // one before it (rows along a path).
@@ -551,7 +844,7 @@ impl Robot {
                 z[k] = start[k];
             }
         }
-        let z = match self.quasi_newton(&setup, loads, z, &mut warm.inv, f64::INFINITY, 60) {
+        let z = match self.quasi_newton(setup, loads, z, &mut warm.inv, f64::INFINITY, 60) {
             Ok(z) if z.iter().all(|v| v.is_finite()) => z,
             _ => {
                 warm.inv = None;
@@ -563,34 +856,17 @@ impl Robot {
         warm.before = offsets;
         warm.z = Some(z);
         warm.rigid = [rigid.x, rigid.y, rigid.phi];
-        Ok(self.equilibrium_of_z(&setup, &z))
+        Ok(z)
     }
 
-    /// The segments integrated at `z`, with their derivatives (finite differences of the
-    /// integration: three more per segment).
+    /// The segments integrated at `z`, with their derivatives (the variational equations
+    /// integrated alongside).
     fn segments_at(&self, setup: &LoadedSetup, loads: &Loads, z: &VN) -> Segments {
-        let e = self.loaded_eval(setup, loads, z, SegmentMode::Exact);
-        let mut lin = [[[0.0; 3]; 3]; 3];
-        for i in 0..3 {
-            let inp = e.input[i];
-            for k in 0..3 {
-                let h = if k < 2 {
-                    1e-6 * inp[0].abs().max(inp[1].abs()).max(1.0)
-                } else {
-                    1e-9 * (inp[2].abs() * 1e3).max(1.0)
-                };
-                let mut p = inp;
-                p[k] += h;
-                let o = setup.seg[i].deflect(loads.ei, [p[0], p[1]], p[2]);
-                for c in 0..3 {
-                    lin[i][c][k] = (o[c] - e.out[i][c]) / h;
-                }
-            }
-        }
+        let e = self.loaded_eval(setup, loads, z, SegmentMode::Variational);
         Segments {
             input: e.input,
             out: e.out,
-            lin,
+            lin: e.lin,
         }
     }
 
@@ -604,14 +880,35 @@ impl Robot {
         segs: &Segments,
         f: &VN,
     ) -> MN {
+        // Leg i reads the pose and its own lambda, joint displacement and base curvature: a
+        // column of those moves only its share, the others' are those at `z` (the same
+        // residual as a whole evaluation, bit for bit).
+        let (sp, cp) = z[2].sin_cos();
+        let base: [LegTerms; 3] = std::array::from_fn(|i| {
+            let mut t = self.leg_terms(i, setup, loads, z, sp, cp);
+            t.out = segs.linear(i, &t.input);
+            t
+        });
         let mut jac = MN::zeros();
         for k in 0..N {
             let h = 1e-7 * z[k].abs().max(if k == 2 { 1e-3 } else { 1.0 });
             let mut zp = *z;
             zp[k] += h;
-            let fp = self
-                .loaded_eval(setup, loads, &zp, SegmentMode::Linear(segs))
-                .res;
+            let leg = match k {
+                0..=2 => None,
+                3..=5 => Some(k - 3),
+                6..=11 => Some((k - 6) / 2),
+                _ => Some(k - 12),
+            };
+            let mut terms = base;
+            let (sp, cp) = if k == 2 { zp[2].sin_cos() } else { (sp, cp) };
+            for (i, t) in terms.iter_mut().enumerate() {
+                if leg.is_none_or(|l| l == i) {
+                    *t = self.leg_terms(i, setup, loads, &zp, sp, cp);
+                    t.out = segs.linear(i, &t.input);
+                }
+            }
+            let fp = self.assemble(loads, &zp, &terms);
             jac.set_column(k, &((fp - f) / h));
         }
         jac
@@ -653,70 +950,109 @@ impl Robot {
         z: &VN,
         mode: SegmentMode,
     ) -> Evaluation {
+        let (sp, cp) = z[2].sin_cos();
+        let mut terms: [LegTerms; 3] =
+            std::array::from_fn(|i| self.leg_terms(i, st, loads, z, sp, cp));
+        let mut lins = [[[0.0; 3]; 3]; 3];
+        match mode {
+            SegmentMode::Exact => {
+                let f = std::array::from_fn(|i| [terms[i].input[0], terms[i].input[1]]);
+                let u0 = std::array::from_fn(|i| terms[i].input[2]);
+                let outs = deflect3(&st.seg, loads.ei, f, u0);
+                for (t, o) in terms.iter_mut().zip(outs) {
+                    t.out = o;
+                }
+            }
+            SegmentMode::Variational => {
+                let f = std::array::from_fn(|i| [terms[i].input[0], terms[i].input[1]]);
+                let u0 = std::array::from_fn(|i| terms[i].input[2]);
+                let (outs, jacs) = deflect_jac3(&st.seg, loads.ei, f, u0);
+                for (t, o) in terms.iter_mut().zip(outs) {
+                    t.out = o;
+                }
+                lins = jacs;
+            }
+            SegmentMode::Linear(s) => {
+                for (i, t) in terms.iter_mut().enumerate() {
+                    t.out = s.linear(i, &t.input);
+                }
+            }
+        }
+        Evaluation {
+            res: self.assemble(loads, z, &terms),
+            input: std::array::from_fn(|i| terms[i].input),
+            out: std::array::from_fn(|i| terms[i].out),
+            lin: lins,
+        }
+    }
+
+    /// Leg i's share of the residual at `z` (`sp`, `cp` the sine and cosine of its phi), its
+    /// segment's output not yet filled in.
+    fn leg_terms(
+        &self,
+        i: usize,
+        st: &LoadedSetup,
+        loads: &Loads,
+        z: &VN,
+        sp: f64,
+        cp: f64,
+    ) -> LegTerms {
+        let springs = loads.k_m != 0.0 || loads.k_p != 0.0;
+        let leg = &self.legs[i];
+        let sg = &st.seg[i];
+        let m = [sg.m0[0] + z[6 + 2 * i], sg.m0[1] + z[7 + 2 * i]];
+        // P_i - E and P_i (geometry.md eq. 5).
+        let pe = [
+            cp * leg.p_e[0] - sp * leg.p_e[1],
+            sp * leg.p_e[0] + cp * leg.p_e[1],
+        ];
+        let p = [z[0] + pe[0], z[1] + pe[1]];
+        let d = g::sub(p, m);
+        let l = leg.l_st;
+        let closure = (g::dot(d, d) - l * l) / (2.0 * l);
+        let u = g::scale(1.0 / g::norm(d).max(1e-9), d);
+        let (tau, zeta_k) = if springs {
+            let gamma = g::signed_angle(sg.t, d);
+            let zeta = g::signed_angle(pe, g::sub(m, p));
+            let zk = loads.k_p * (zeta - st.rest[i].1);
+            (-loads.k_m * (gamma - st.rest[i].0) - zk, zk)
+        } else {
+            (0.0, 0.0)
+        };
+        let f = g::add(g::scale(z[3 + i], u), g::scale(tau / l, g::perp(u)));
+        // The segment tip carries -f.
+        let fl = leg.to_local([-f[0], -f[1]]);
+        LegTerms {
+            closure,
+            f,
+            moment: g::cross(pe, f) + zeta_k,
+            input: [fl[0], fl[1], z[12 + i] / leg.l_c],
+            out: [0.0; 3],
+        }
+    }
+
+    /// The residual from the legs' shares.
+    fn assemble(&self, loads: &Loads, z: &VN, terms: &[LegTerms; 3]) -> VN {
         let mut out = VN::zeros();
         let mut sum_f = [loads.force[0], loads.force[1]];
         let mut sum_m = loads.couple;
-        let mut input = [[0.0; 3]; 3];
-        let mut outs = [[0.0; 3]; 3];
-        let (sp, cp) = z[2].sin_cos();
-        let springs = loads.k_m != 0.0 || loads.k_p != 0.0;
-        for i in 0..3 {
+        for (i, t) in terms.iter().enumerate() {
+            out[i] = t.closure;
+            sum_f = g::add(sum_f, t.f);
+            sum_m += t.moment;
+        }
+        for (i, t) in terms.iter().enumerate() {
             let leg = &self.legs[i];
-            let sg = &st.seg[i];
-            let m = [sg.m0[0] + z[6 + 2 * i], sg.m0[1] + z[7 + 2 * i]];
-            // P_i - E and P_i (geometry.md eq. 5).
-            let pe = [
-                cp * leg.p_e[0] - sp * leg.p_e[1],
-                sp * leg.p_e[0] + cp * leg.p_e[1],
-            ];
-            let p = [z[0] + pe[0], z[1] + pe[1]];
-            let d = g::sub(p, m);
-            let l = leg.l_st;
-            out[i] = (g::dot(d, d) - l * l) / (2.0 * l);
-            let u = g::scale(1.0 / g::norm(d).max(1e-9), d);
-            let (tau, zeta_k) = if springs {
-                let gamma = g::signed_angle(sg.t, d);
-                let zeta = g::signed_angle(pe, g::sub(m, p));
-                let zk = loads.k_p * (zeta - st.rest[i].1);
-                (-loads.k_m * (gamma - st.rest[i].0) - zk, zk)
-            } else {
-                (0.0, 0.0)
-            };
-            let f = g::add(g::scale(z[3 + i], u), g::scale(tau / l, g::perp(u)));
-            sum_f = g::add(sum_f, f);
-            sum_m += g::cross(pe, f) + zeta_k;
-            // The segment tip carries -f.
-            let fl = leg.to_local([-f[0], -f[1]]);
-            let inp = [fl[0], fl[1], z[12 + i] / leg.l_c];
-            let o = match mode {
-                SegmentMode::Exact => sg.deflect(loads.ei, fl, inp[2]),
-                SegmentMode::Linear(s) => {
-                    let dx = [
-                        inp[0] - s.input[i][0],
-                        inp[1] - s.input[i][1],
-                        inp[2] - s.input[i][2],
-                    ];
-                    std::array::from_fn(|c| {
-                        let r = &s.lin[i][c];
-                        s.out[i][c] + r[0] * dx[0] + r[1] * dx[1] + r[2] * dx[2]
-                    })
-                }
-            };
+            let o = t.out;
             let disp = leg.to_base([o[0], o[1]]);
             out[6 + 2 * i] = z[6 + 2 * i] - disp[0];
             out[7 + 2 * i] = z[7 + 2 * i] - disp[1];
             out[12 + i] = o[2] * leg.l_c;
-            input[i] = inp;
-            outs[i] = o;
         }
         out[3] = sum_f[0];
         out[4] = sum_f[1];
         out[5] = sum_m / self.r_char;
-        Evaluation {
-            res: out,
-            input,
-            out: outs,
-        }
+        out
     }
 
     /// The first-order response of the platform pose to the five load parameters (force x, y in
@@ -745,7 +1081,7 @@ impl Robot {
     ) -> Result<[[f64; 3]; 5], FkError> {
         let rest = *warm.rest.get_or_insert_with(|| self.home_joint_angles());
         let st = self.loaded_setup_at_rest(kappa, rest);
-        let z = match self.fk_loaded_warm(kappa, loads, guess, warm) {
+        let z = match self.fk_loaded_warm_in(&st, kappa, loads, guess, warm) {
             Ok(_) if !loads.is_unloaded() => warm.z.ok_or(FkError::NoSolution { reached: 0.0 })?,
             _ => self.fk_loaded_in(&st, kappa, loads, guess)?,
         };
@@ -1015,6 +1351,50 @@ mod tests {
                     resp[j][k],
                     fd[k]
                 );
+            }
+        }
+    }
+
+    #[test]
+    fn variational_equations_are_the_derivatives_of_the_integration() {
+        let r = Robot::nominal();
+        let ei = 6.5e4;
+        for (i, kappa, f, u0) in [
+            (0, 0.00307872, [0.7, -0.4], 1e-4),
+            (1, 0.012, [-3.0, 2.0], -2e-3),
+            (2, -0.006, [12.0, 5.0], 5e-3),
+        ] {
+            let seg = Segment::new(&r.legs[i], kappa);
+            let o = seg.deflect(ei, f, u0);
+            let (oj, jac) = seg.deflect_jac(ei, f, u0);
+            assert_eq!(o, oj);
+            let segs = [
+                Segment::new(&r.legs[0], kappa),
+                Segment::new(&r.legs[1], -kappa),
+                Segment::new(&r.legs[i], kappa),
+            ];
+            let three = deflect3(&segs, ei, [[0.1, 0.2], f, f], [1e-5, u0, u0]);
+            assert_eq!(three[2], o);
+            assert_eq!(three[1], segs[1].deflect(ei, f, u0));
+            let (o3, j3) = deflect_jac3(&segs, ei, [[0.1, 0.2], f, f], [1e-5, u0, u0]);
+            assert_eq!((o3[2], j3[2]), (o, jac));
+            assert_eq!((o3[0], j3[0]), segs[0].deflect_jac(ei, [0.1, 0.2], 1e-5));
+            for k in 0..3 {
+                let h = if k < 2 { 1e-5 } else { 1e-8 };
+                let mut p = [f[0], f[1], u0];
+                let mut m = p;
+                p[k] += h;
+                m[k] -= h;
+                let op = seg.deflect(ei, [p[0], p[1]], p[2]);
+                let om = seg.deflect(ei, [m[0], m[1]], m[2]);
+                for c in 0..3 {
+                    let fd = (op[c] - om[c]) / (2.0 * h);
+                    assert!(
+                        (fd - jac[c][k]).abs() < 1e-6 * fd.abs().max(1e-3),
+                        "seg {i} out {c} in {k}: {} vs {fd}",
+                        jac[c][k]
+                    );
+                }
             }
         }
     }
