@@ -5,15 +5,9 @@
 # plant, in both timing conventions; it fails when an effect at its test strength or more is not
 # named or a parameter is off by more than 3 stated standard errors, when anything outside the
 # vocabulary or not in the data is named, or when the held-out error stays above 1.5x the floor.
-# About 4 minutes on two cores (recordings included; cached in out/validate-residuals-reduced).
-#
-# Off unless PCR_VALIDATION_CHECK=1: the residual analysis's algorithm does not hold every rule
-# yet (docs/residuals.md, "Validation", lists the rules today's algorithm fails). Enable it when
-# it does; until then the check says so and passes.
+# The time rule is off here (--time-budget-s 0): times are measured by the full sweep and in
+# BENCHMARKS.md, not gated on a shared CI machine. A few minutes on two cores, recordings
+# included (cached in out/validate-residuals-reduced).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-if [ "${PCR_VALIDATION_CHECK:-0}" != "1" ]; then
-  echo "check_residuals_validation: off (PCR_VALIDATION_CHECK=1 runs scripts/validate_residuals.sh --reduced --check; today's algorithm fails some of its rules: docs/residuals.md, \"Validation\")"
-  exit 0
-fi
-exec bash scripts/validate_residuals.sh --reduced --check --jobs 2 "$@"
+exec bash scripts/validate_residuals.sh --reduced --check --jobs 2 --time-budget-s 0 "$@"

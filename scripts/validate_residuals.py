@@ -180,6 +180,15 @@ EFFECTS = {
 # Strengths per library effect (factors of today's test value): one below detection, the test
 # value, 3x and 10x. Where the plant cannot hold 10x in its working range the sweep steps down
 # through FALLBACK and says which it used.
+# Known failures: cases whose rules today's analysis does not hold, with why (docs/residuals.md,
+# "Validation"). --check reports their failures as expected instead of failing on them, and says
+# so when one passes; every other case must hold every rule.
+EXPECTED_FAILURES = {
+    "joint_springs-3x": "k_M 6-8 % low (845 against 900 N mm/rad): the first calibration takes "
+                        "part of the springs into the geometry, and the recalibration from the "
+                        "drawing that recovers 919 N mm/rad has the worse held-out error",
+}
+
 LOW = {"backlash": 0.1, "latency": 0.1, "creep": 0.1, "drift": 0.1, "joint_springs": 0.1,
        "external_load": 0.1, "frame": 0.1, "periodic": 0.1}
 FALLBACK = [7.0, 5.0, 4.0]
@@ -623,7 +632,7 @@ def evaluate(case, seed, conv, factors, res, t, floor, rows, err, args):
         failures.append("after/floor %.2f" % run["after_floor"])
     # The time on one core: the cpu time of the pinned run (its wall time also counts the
     # other jobs of a shared machine), for the full-size recordings (40k + 16k rows).
-    if t["cpu_s"] is not None and t["cpu_s"] > args.time_budget_s and (
+    if args.time_budget_s > 0 and t["cpu_s"] is not None and t["cpu_s"] > args.time_budget_s and (
             case.full_size or args.size == "full"):
         failures.append("%.1f s cpu on one core" % t["cpu_s"])
     run["failures"] = failures
@@ -936,13 +945,22 @@ def main(argv=None):
     (out / "validation.json").write_text(json.dumps(
         {"meta": meta, "limits": limits, "cases": aggs, "runs": runs}, indent=1, default=str))
     write_csv(out / "runs.csv", runs)
-    failing = [r for r in runs if r["failures"]]
+    expected = [r for r in runs if r["failures"] and r["case"] in EXPECTED_FAILURES]
+    failing = [r for r in runs if r["failures"] and r["case"] not in EXPECTED_FAILURES]
+    passing_expected = sorted({r["case"] for r in runs if not r["failures"]} &
+                              set(EXPECTED_FAILURES) - {r["case"] for r in expected})
     missing = [a_ for a_ in aggs if not a_["n"]]
     print("validate_residuals: %d runs in %.0f s, %d with a failed rule; tables in %s" % (
         len(runs), meta["seconds"], len(failing), out / "validation.md"))
     for e, v in limits.items():
         print("  detection limit %-14s %s" % (e, ("%s (%gx)" % (v["limit"], v["limit_factor"]))
                                               if v["limit"] else "none"))
+    for r in expected:
+        print("  expected failure: %s s%d %s: %s (%s)" % (
+            r["case"], r["seed"], r["convention"], "; ".join(r["failures"]),
+            EXPECTED_FAILURES[r["case"]]))
+    for c in passing_expected:
+        print("  %s holds every rule now: take it off EXPECTED_FAILURES" % c)
     if a.check:
         rules = {}
         for r in failing:

@@ -11,7 +11,11 @@ fn series(r: &Robot) -> Vec<([f64; 3], Pose)> {
     let mut v = Vec::new();
     for k in 0..2000 {
         let t = k as f64 * 0.004;
-        let p = Pose::from_mm_deg(40.0 * (1.1 * t).cos(), 40.0 * (1.7 * t).sin(), 6.0 * (1.3 * t).sin());
+        let p = Pose::from_mm_deg(
+            40.0 * (1.1 * t).cos(),
+            40.0 * (1.7 * t).sin(),
+            6.0 * (1.3 * t).sin(),
+        );
         if let Ok(s) = r.ik(&p) {
             v.push((s.kappa, p));
         }
@@ -23,25 +27,52 @@ fn main() {
     let r = Robot::nominal();
     let s = series(&r);
     let cases = [
-        ("force", Loads { ei: 6.5e4, force: [0.392, -0.280], couple: 0.0, k_m: 0.0, k_p: 0.0 }),
-        ("springs", Loads { ei: 6.5e4, force: [0.0, 0.0], couple: 0.0, k_m: 300.0, k_p: 200.0 }),
+        (
+            "force",
+            Loads {
+                ei: 6.5e4,
+                force: [0.392, -0.280],
+                couple: 0.0,
+                k_m: 0.0,
+                k_p: 0.0,
+            },
+        ),
+        (
+            "springs",
+            Loads {
+                ei: 6.5e4,
+                force: [0.0, 0.0],
+                couple: 0.0,
+                k_m: 300.0,
+                k_p: 200.0,
+            },
+        ),
     ];
     // STATICS_DUMP=path: every pose and response of the first repetition, to compare builds.
-    let mut dump = std::env::var("STATICS_DUMP").ok().map(|p| std::fs::File::create(p).unwrap());
+    let mut dump = std::env::var("STATICS_DUMP")
+        .ok()
+        .map(|p| std::fs::File::create(p).unwrap());
     for (name, loads) in cases {
         for rep in 0..8 {
             let t0 = Instant::now();
             let mut warm = LoadedWarm::default();
             let mut sum = [0.0f64; 3];
             for (kappa, p) in &s {
-                let e = r.fk_loaded_warm(black_box(kappa), &loads, p, &mut warm).unwrap();
+                let e = r
+                    .fk_loaded_warm(black_box(kappa), &loads, p, &mut warm)
+                    .unwrap();
                 sum[0] += e.pose.x;
                 sum[1] += e.pose.y;
                 sum[2] += e.pose.phi;
                 if rep == 0 {
                     if let Some(f) = dump.as_mut() {
                         use std::io::Write;
-                        writeln!(f, "{name} fk {:e} {:e} {:e}", e.pose.x, e.pose.y, e.pose.phi).unwrap();
+                        writeln!(
+                            f,
+                            "{name} fk {:e} {:e} {:e}",
+                            e.pose.x, e.pose.y, e.pose.phi
+                        )
+                        .unwrap();
                     }
                 }
             }
@@ -50,12 +81,15 @@ fn main() {
             let mut warm = LoadedWarm::default();
             let mut rsum = 0.0f64;
             for (kappa, p) in &s {
-                let resp = r.load_response_warm(black_box(kappa), &loads, p, &mut warm).unwrap();
+                let resp = r
+                    .load_response_warm(black_box(kappa), &loads, p, &mut warm)
+                    .unwrap();
                 rsum += resp.iter().flatten().map(|v| v.abs()).sum::<f64>();
                 if rep == 0 {
                     if let Some(f) = dump.as_mut() {
                         use std::io::Write;
-                        let v: Vec<String> = resp.iter().flatten().map(|v| format!("{v:e}")).collect();
+                        let v: Vec<String> =
+                            resp.iter().flatten().map(|v| format!("{v:e}")).collect();
                         writeln!(f, "{name} lr {}", v.join(" ")).unwrap();
                     }
                 }

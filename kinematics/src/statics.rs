@@ -233,7 +233,12 @@ fn deflect3(seg: &[Segment; 3], ei: f64, f: [Vec2; 3], u0: [f64; 3]) -> [[f64; 3
             )
         });
         let k4: [[f64; 4]; 3] = std::array::from_fn(|i| {
-            rhs(i, a1[i], turn(e[i], h[i] * k3[i][0]), u[i] + h[i] * k3[i][1])
+            rhs(
+                i,
+                a1[i],
+                turn(e[i], h[i] * k3[i][0]),
+                u[i] + h[i] * k3[i][1],
+            )
         });
         for i in 0..3 {
             let w = h[i] / 6.0;
@@ -307,9 +312,8 @@ fn deflect_jac3(
                 u[i] + 0.5 * h[i] * k1[1],
             )
         });
-        let v2: [_; 3] = std::array::from_fn(|i| {
-            var(i, &adv(&ts[i], &v1[i], 0.5 * h[i]), r2[i].1, r2[i].2)
-        });
+        let v2: [_; 3] =
+            std::array::from_fn(|i| var(i, &adv(&ts[i], &v1[i], 0.5 * h[i]), r2[i].1, r2[i].2));
         let r3: [_; 3] = std::array::from_fn(|i| {
             let k2 = r2[i].0;
             rhs(
@@ -319,9 +323,8 @@ fn deflect_jac3(
                 u[i] + 0.5 * h[i] * k2[1],
             )
         });
-        let v3: [_; 3] = std::array::from_fn(|i| {
-            var(i, &adv(&ts[i], &v2[i], 0.5 * h[i]), r3[i].1, r3[i].2)
-        });
+        let v3: [_; 3] =
+            std::array::from_fn(|i| var(i, &adv(&ts[i], &v2[i], 0.5 * h[i]), r3[i].1, r3[i].2));
         let r4: [_; 3] = std::array::from_fn(|i| {
             let k3 = r3[i].0;
             rhs(i, a1[i], turn(e[i], h[i] * k3[0]), u[i] + h[i] * k3[1])
@@ -1253,7 +1256,8 @@ mod tests {
         let rigid_home = r.fk(&kh).unwrap();
         let e = r.fk_loaded(&kh, &springs, &Pose::default()).unwrap();
         assert!(
-            e.pose.position_distance(&rigid_home) < 1e-9 && (e.pose.phi - rigid_home.phi).abs() < 1e-11,
+            e.pose.position_distance(&rigid_home) < 1e-9
+                && (e.pose.phi - rigid_home.phi).abs() < 1e-11,
             "{:?} vs {:?}",
             e.pose,
             rigid_home
@@ -1535,6 +1539,4 @@ mod tests {
             }
         }
     }
-
 }
-
