@@ -272,7 +272,11 @@ fn attribute_from<'a>(
             }
         }
         match search.settle_provisional(&set) {
-            Some(round) if restart < MAX_RESTARTS => first = round,
+            Some(round) if restart < MAX_RESTARTS => {
+                // The scores of the rounds searched again are those of the new search.
+                search.scores.retain(|s| s.round < round);
+                first = round;
+            }
             _ => break,
         }
     }
@@ -704,8 +708,6 @@ impl<'a> Search<'a> {
             .map(|s| s.note.clone())
             .unwrap_or_default();
         self.banned.push((round, name, note));
-        // The scores of the rounds searched again are those of the new search.
-        self.scores.retain(|s| s.round < round);
         Some(round)
     }
 
@@ -826,7 +828,7 @@ fn judge_full_model(
 
 /// Most times the forward search goes back on effects taken in provisionally
 /// ([`Search::settle_provisional`]) and searches again.
-const MAX_RESTARTS: usize = 2;
+const MAX_RESTARTS: usize = 1;
 
 /// Most significant candidates of a round put into the full model: when the best three are
 /// not confirmed (the full model does not keep their gain, they leave the drawing, their
