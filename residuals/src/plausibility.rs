@@ -103,14 +103,14 @@ mod tests {
             ..Compliance::default()
         });
         c.effects.frame = Some(FrameCorrection {
-            dx_mm: 35.0,
+            dx_mm: 5.0,
             dy_mm: 0.0,
             dphi_deg: 0.0,
         });
         assert_eq!(
             unphysical(&c, &drawing, &drawing, &Options::default()).as_deref(),
             Some(
-                "unphysical: a capture frame off by (35.00, 0.00) mm and 0.00 deg, negative joint \
+                "unphysical: a capture frame off by (5.00, 0.00) mm and 0.00 deg, negative joint \
                  springs (k_M -10.0, k_P 0.0 N mm/rad), a tendon that shortens under load (creep \
                  gains [-0.1, 0.0, 0.0]), the motion leads the command by 0.050 s"
             )
