@@ -216,30 +216,20 @@ fn deflect3(seg: &[Segment; 3], ei: f64, f: [Vec2; 3], u0: [f64; 3]) -> [[f64; 3
         let am: [[f64; 2]; 3] = std::array::from_fn(|i| seg[i].arc[2 * j + 1]);
         let a1: [[f64; 2]; 3] = std::array::from_fn(|i| seg[i].arc[2 * j + 2]);
         let k1: [[f64; 4]; 3] = std::array::from_fn(|i| rhs(i, a0[i], e[i], u[i]));
-        let k2: [[f64; 4]; 3] = std::array::from_fn(|i| {
-            rhs(
-                i,
-                am[i],
-                turn(e[i], 0.5 * h[i] * k1[i][0]),
-                u[i] + 0.5 * h[i] * k1[i][1],
-            )
-        });
-        let k3: [[f64; 4]; 3] = std::array::from_fn(|i| {
-            rhs(
-                i,
-                am[i],
-                turn(e[i], 0.5 * h[i] * k2[i][0]),
-                u[i] + 0.5 * h[i] * k2[i][1],
-            )
-        });
-        let k4: [[f64; 4]; 3] = std::array::from_fn(|i| {
-            rhs(
-                i,
-                a1[i],
-                turn(e[i], h[i] * k3[i][0]),
-                u[i] + h[i] * k3[i][1],
-            )
-        });
+        // The next RK4 stage at `a`, a fraction `f` of the step along the stage before.
+        let stage = |k: &[[f64; 4]; 3], a: &[[f64; 2]; 3], f: f64| -> [[f64; 4]; 3] {
+            std::array::from_fn(|i| {
+                rhs(
+                    i,
+                    a[i],
+                    turn(e[i], f * h[i] * k[i][0]),
+                    u[i] + f * h[i] * k[i][1],
+                )
+            })
+        };
+        let k2 = stage(&k1, &am, 0.5);
+        let k3 = stage(&k2, &am, 0.5);
+        let k4 = stage(&k3, &a1, 1.0);
         for i in 0..3 {
             let w = h[i] / 6.0;
             let (k1, k2, k3, k4) = (k1[i], k2[i], k3[i], k4[i]);
@@ -266,7 +256,9 @@ fn deflect_jac3(
     let fx: [f64; 3] = std::array::from_fn(|i| f[i][0] / ei);
     let fy: [f64; 3] = std::array::from_fn(|i| f[i][1] / ei);
     let g = 1.0 / ei;
-    let rhs = |i: usize, a: [f64; 2], e: [f64; 2], u: f64| -> ([f64; 4], f64, f64) {
+    // One RK4 stage: the derivatives and the tangent's (cos, sin).
+    type Stage = ([f64; 4], f64, f64);
+    let rhs = |i: usize, a: [f64; 2], e: [f64; 2], u: f64| -> Stage {
         let c = a[0] * e[0] - a[1] * e[1];
         let s = a[1] * e[0] + a[0] * e[1];
         ([u, s * fx[i] - c * fy[i], c - a[0], s - a[1]], c, s)
@@ -303,32 +295,20 @@ fn deflect_jac3(
         let a1: [[f64; 2]; 3] = std::array::from_fn(|i| seg[i].arc[2 * j + 2]);
         let r1: [_; 3] = std::array::from_fn(|i| rhs(i, a0[i], e[i], u[i]));
         let v1: [_; 3] = std::array::from_fn(|i| var(i, &ts[i], r1[i].1, r1[i].2));
-        let r2: [_; 3] = std::array::from_fn(|i| {
-            let k1 = r1[i].0;
-            rhs(
-                i,
-                am[i],
-                turn(e[i], 0.5 * h[i] * k1[0]),
-                u[i] + 0.5 * h[i] * k1[1],
-            )
-        });
+        // The next RK4 stage at `a`, a fraction `f` of the step along the stage before.
+        let stage = |prev: &[Stage; 3], a: &[[f64; 2]; 3], f: f64| -> [Stage; 3] {
+            std::array::from_fn(|i| {
+                let k = prev[i].0;
+                rhs(i, a[i], turn(e[i], f * h[i] * k[0]), u[i] + f * h[i] * k[1])
+            })
+        };
+        let r2 = stage(&r1, &am, 0.5);
         let v2: [_; 3] =
             std::array::from_fn(|i| var(i, &adv(&ts[i], &v1[i], 0.5 * h[i]), r2[i].1, r2[i].2));
-        let r3: [_; 3] = std::array::from_fn(|i| {
-            let k2 = r2[i].0;
-            rhs(
-                i,
-                am[i],
-                turn(e[i], 0.5 * h[i] * k2[0]),
-                u[i] + 0.5 * h[i] * k2[1],
-            )
-        });
+        let r3 = stage(&r2, &am, 0.5);
         let v3: [_; 3] =
             std::array::from_fn(|i| var(i, &adv(&ts[i], &v2[i], 0.5 * h[i]), r3[i].1, r3[i].2));
-        let r4: [_; 3] = std::array::from_fn(|i| {
-            let k3 = r3[i].0;
-            rhs(i, a1[i], turn(e[i], h[i] * k3[0]), u[i] + h[i] * k3[1])
-        });
+        let r4 = stage(&r3, &a1, 1.0);
         let v4: [_; 3] =
             std::array::from_fn(|i| var(i, &adv(&ts[i], &v3[i], h[i]), r4[i].1, r4[i].2));
         for i in 0..3 {

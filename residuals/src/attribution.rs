@@ -280,13 +280,7 @@ fn attribute_from<'a>(
             _ => break,
         }
     }
-    let removed = search.backward(&backward::Setting {
-        series,
-        blocks,
-        opts,
-        w_phi,
-        noise_ms: set.noise_ms,
-    });
+    let removed = search.backward(&set.backward());
     let Search {
         config,
         ctx,
@@ -349,6 +343,19 @@ struct Setting<'a, 'o> {
     noise_ms: f64,
     /// Whether the calibration's repeated visits of one target disagree over time.
     visits_disagree: bool,
+}
+
+impl Setting<'_, '_> {
+    /// What the backward pass (and the full-model test of a near miss) needs of it.
+    fn backward(&self) -> backward::Setting<'_> {
+        backward::Setting {
+            series: self.series,
+            blocks: self.blocks,
+            opts: self.opts,
+            w_phi: self.w_phi,
+            noise_ms: self.noise_ms,
+        }
+    }
 }
 
 /// What the capture noise explains of a row's weighted mean square, mm^2 (0 without settled
@@ -793,36 +800,16 @@ fn judge_full_model(
     let b = crate::scoring::sse_per_block(after, test, None, nb);
     let p = crate::scoring::paired_ratio_p(&a, &b, &set.blocks.held_out);
     let n = test.len().max(1) as f64;
-    let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
-    let gain = (ma - mb).max(0.0).sqrt();
-    let excess = ma - set.noise_ms;
-    let share = if excess > 0.0 {
-        (ma - mb) / excess
-    } else {
-        0.0
+    let ms = [a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n];
+    let cmp = backward::Comparison {
+        ms,
+        p,
+        unrecalibrated: (ms[0], p),
     };
     let alpha = set.opts.alpha / n_candidates.max(1) as f64;
-    let mut why = Vec::new();
-    if p >= alpha {
-        why.push(format!("p = {p:.2e} >= {alpha:.1e}"));
-    }
-    if gain < set.opts.min_effect_mm {
-        why.push(format!(
-            "held-out gain {gain:.4} mm < {} mm",
-            set.opts.min_effect_mm
-        ));
-    }
-    if share < MIN_SHARE {
-        why.push(format!(
-            "explains {:.0} % of the structured residual (< {:.0} %)",
-            100.0 * share,
-            100.0 * MIN_SHARE
-        ));
-    }
-    if why.is_empty() {
-        Ok(p)
-    } else {
-        Err(why.join("; "))
+    match backward::main_rule(&cmp, alpha, &set.backward()) {
+        None => Ok(p),
+        Some(why) => Err(why),
     }
 }
 
@@ -925,32 +912,22 @@ const LINEARISATION_MM: f64 = 20.0;
 /// over the calibration recording) asks the calibration parameters for a change that large, and
 /// it is the one the data need most.
 fn within_linearisation(mut f: Fitted) -> Fitted {
-    let largest = f
-        .delta
-        .iter()
-        .fold(0.0f64, |m, d| m.max(d[0].hypot(d[1])).max(d[2].abs()));
-    if largest >= LINEARISATION_MM {
-        let s = 0.5 * LINEARISATION_MM / largest;
-        for d in f.delta.iter_mut() {
-            for v in d.iter_mut() {
-                *v *= s;
-            }
-        }
-        if let Some(a) = f.alone.as_mut() {
-            let la = a
-                .iter()
-                .fold(0.0f64, |m, d| m.max(d[0].hypot(d[1])).max(d[2].abs()));
-            if la >= LINEARISATION_MM {
-                let sa = 0.5 * LINEARISATION_MM / la;
-                for d in a.iter_mut() {
-                    for v in d.iter_mut() {
-                        *v *= sa;
-                    }
-                }
-            }
-        }
+    damp_within(&mut f.delta);
+    if let Some(a) = f.alone.as_mut() {
+        damp_within(a);
     }
     f
+}
+
+/// Scales the row changes `d` to half of [`LINEARISATION_MM`] at the largest when they exceed it.
+fn damp_within(d: &mut [[f64; 3]]) {
+    let largest = d
+        .iter()
+        .fold(0.0f64, |m, v| m.max(v[0].hypot(v[1])).max(v[2].abs()));
+    if largest >= LINEARISATION_MM {
+        let s = 0.5 * LINEARISATION_MM / largest;
+        d.iter_mut().flatten().for_each(|v| *v *= s);
+    }
 }
 
 impl Verdict {

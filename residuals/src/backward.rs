@@ -151,7 +151,7 @@ pub(crate) fn fails(w: &Comparison, n_effects: usize, set: &Setting) -> Option<S
 }
 
 /// The forward test's main rule against the recalibrated model without the effect.
-fn main_rule(w: &Comparison, alpha: f64, set: &Setting) -> Option<String> {
+pub(crate) fn main_rule(w: &Comparison, alpha: f64, set: &Setting) -> Option<String> {
     let red = w.ms[0] - w.ms[1];
     let gain = red.signum() * red.abs().sqrt();
     let excess = w.ms[0] - set.noise_ms;
@@ -168,7 +168,7 @@ fn main_rule(w: &Comparison, alpha: f64, set: &Setting) -> Option<String> {
     }
     if share < MIN_SHARE {
         note.push(format!(
-            "explains {:.0} % of what the others leave above the noise (< {:.0} %)",
+            "explains {:.0} % of what the model without it leaves above the noise (< {:.0} %)",
             100.0 * share,
             100.0 * MIN_SHARE
         ));

@@ -216,16 +216,21 @@ impl<'a> Context<'a> {
         self.loads.get().and_then(|l| l.1)
     }
 
+    /// Row `i`'s curvatures and predicted pose, the start of its loaded equilibrium (`None`
+    /// when the model could not predict it).
+    fn loaded_start(&self, i: usize) -> Option<([f64; 3], pcr_kinematics::Pose)> {
+        let p = self.pred(&self.rows[i]);
+        let pose = p.pose?;
+        Some((
+            p.kappa,
+            pcr_kinematics::Pose::new(pose[0], pose[1], pose[2]),
+        ))
+    }
+
     /// The load response of row `i`, solved.
     fn load_response_at(&self, i: usize, loads: &pcr_kinematics::statics::Loads) -> [[f64; 3]; 5] {
-        let p = self.pred(&self.rows[i]);
-        let Some(pose) = p.pose else {
-            return [[0.0; 3]; 5];
-        };
-        let guess = pcr_kinematics::Pose::new(pose[0], pose[1], pose[2]);
-        self.model
-            .robot
-            .load_response(&p.kappa, loads, &guess)
+        self.loaded_start(i)
+            .and_then(|(kappa, guess)| self.model.robot.load_response(&kappa, loads, &guess).ok())
             .unwrap_or([[0.0; 3]; 5])
     }
 
@@ -255,14 +260,13 @@ impl<'a> Context<'a> {
                 let mut warm = pcr_kinematics::statics::LoadedWarm::default();
                 c.iter()
                     .map(|&i| {
-                        let p = self.pred(&self.rows[i]);
-                        let Some(pose) = p.pose else {
-                            return [[0.0; 3]; 5];
-                        };
-                        let guess = pcr_kinematics::Pose::new(pose[0], pose[1], pose[2]);
-                        self.model
-                            .robot
-                            .load_response_warm(&p.kappa, loads, &guess, &mut warm)
+                        self.loaded_start(i)
+                            .and_then(|(kappa, guess)| {
+                                self.model
+                                    .robot
+                                    .load_response_warm(&kappa, loads, &guess, &mut warm)
+                                    .ok()
+                            })
                             .unwrap_or([[0.0; 3]; 5])
                     })
                     .collect()
