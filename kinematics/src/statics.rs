@@ -550,6 +550,18 @@ struct Evaluation {
     lin: [[[f64; 3]; 3]; 3],
 }
 
+/// A loaded equilibrium's pose and its first-order responses
+/// ([`Robot::loaded_sensitivity_warm`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LoadedSensitivity {
+    /// The platform pose.
+    pub pose: Pose,
+    /// d(x mm, y mm, phi rad)/d kappa_i (1/mm), one column per leg.
+    pub d_kappa: [[f64; 3]; 3],
+    /// d(x mm, y mm, phi rad)/d(force x N, force y N, couple N mm, k_M, k_P N mm/rad).
+    pub d_loads: [[f64; 3]; 5],
+}
+
 /// The state [`Robot::fk_loaded_warm`] carries from one call to the next along a series: the
 /// last solution and the inverse Jacobian of the quasi-Newton iteration (kept current by
 /// Broyden updates), and the springs' rest angles. One `LoadedWarm` serves one robot.
@@ -1071,6 +1083,52 @@ impl Robot {
         self.load_response_at(&st, loads, &z)
     }
 
+    /// The loaded equilibrium along a series (solved as [`Robot::fk_loaded_warm`] does, from
+    /// the state `warm` carries) with its first-order responses to the curvatures and to the
+    /// five load parameters: what a least-squares fit of parameters that act through the
+    /// curvatures or the loads needs of each row, without solving the equilibrium again per
+    /// parameter.
+    pub fn loaded_sensitivity_warm(
+        &self,
+        kappa: &[f64; 3],
+        loads: &Loads,
+        guess: &Pose,
+        warm: &mut LoadedWarm,
+    ) -> Result<LoadedSensitivity, FkError> {
+        let rest = *warm.rest.get_or_insert_with(|| self.home_joint_angles());
+        let st = self.loaded_setup_at_rest(kappa, rest);
+        let z = match self.fk_loaded_warm_in(&st, kappa, loads, guess, warm) {
+            Ok(z) => z,
+            Err(_) => self.fk_loaded_in(&st, kappa, loads, guess)?,
+        };
+        let segs = self.segments_at(&st, loads, &z);
+        let f0 = self
+            .loaded_eval(&st, loads, &z, SegmentMode::Linear(&segs))
+            .res;
+        let lu = self.loaded_jacobian(&st, loads, &z, &segs, &f0).lu();
+        let d_loads = self.load_columns(&st, loads, &z, &segs, &f0, &lu)?;
+        // The curvatures change the segments themselves: their residual is integrated again
+        // (the same fixed-step integration, smooth in the curvature).
+        let exact = self.loaded_eval(&st, loads, &z, SegmentMode::Exact).res;
+        let mut d_kappa = [[0.0; 3]; 3];
+        for (i, col) in d_kappa.iter_mut().enumerate() {
+            let h = 1e-7 * kappa[i].abs().max(1e-3);
+            let mut kp = *kappa;
+            kp[i] += h;
+            let stp = self.loaded_setup_at_rest(&kp, rest);
+            let ft = (self.loaded_eval(&stp, loads, &z, SegmentMode::Exact).res - exact) / h;
+            let dz = lu
+                .solve(&(-ft))
+                .ok_or(FkError::NoSolution { reached: 0.0 })?;
+            *col = [dz[0], dz[1], dz[2]];
+        }
+        Ok(LoadedSensitivity {
+            pose: Pose::new(z[0], z[1], z[2]),
+            d_kappa,
+            d_loads,
+        })
+    }
+
     /// The load response at the solved equilibrium `z`: the exact Jacobian there, and the
     /// residual's derivatives with respect to the five parameters.
     fn load_response_at(
@@ -1080,9 +1138,25 @@ impl Robot {
         z: &VN,
     ) -> Result<[[f64; 3]; 5], FkError> {
         let segs = self.segments_at(st, loads, z);
-        let lin = SegmentMode::Linear(&segs);
-        let f0 = self.loaded_eval(st, loads, z, lin).res;
+        let f0 = self
+            .loaded_eval(st, loads, z, SegmentMode::Linear(&segs))
+            .res;
         let lu = self.loaded_jacobian(st, loads, z, &segs, &f0).lu();
+        self.load_columns(st, loads, z, &segs, &f0, &lu)
+    }
+
+    /// The responses of the equilibrium `z` to the five load parameters, from the residual
+    /// there (`f0`, segments linearised as `segs`) and the factored Jacobian `lu`.
+    fn load_columns(
+        &self,
+        st: &LoadedSetup,
+        loads: &Loads,
+        z: &VN,
+        segs: &Segments,
+        f0: &VN,
+        lu: &nalgebra::LU<f64, nalgebra::Const<N>, nalgebra::Const<N>>,
+    ) -> Result<[[f64; 3]; 5], FkError> {
+        let lin = SegmentMode::Linear(segs);
         let mut out = [[0.0; 3]; 5];
         for (j, o) in out.iter_mut().enumerate() {
             let mut l = *loads;
@@ -1094,7 +1168,7 @@ impl Robot {
                 3 => l.k_m += h,
                 _ => l.k_p += h,
             }
-            let ft = (self.loaded_eval(st, &l, z, lin).res - f0) / h;
+            let ft = (self.loaded_eval(st, &l, z, lin).res - *f0) / h;
             let dz = lu
                 .solve(&(-ft))
                 .ok_or(FkError::NoSolution { reached: 0.0 })?;
@@ -1333,6 +1407,53 @@ mod tests {
                     (fd[k] - resp[j][k]).abs() < tol.max(2e-6),
                     "param {j} comp {k}: {} vs {}",
                     resp[j][k],
+                    fd[k]
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn loaded_sensitivity_is_the_derivative_of_the_loaded_pose() {
+        let r = Robot::nominal();
+        let target = Pose::from_mm_deg(15.0, -25.0, 8.0);
+        let kappa = r.ik(&target).unwrap().kappa;
+        let base = Loads {
+            force: [0.3, -0.2],
+            couple: 5.0,
+            k_m: 80.0,
+            k_p: 40.0,
+            ..unloaded()
+        };
+        let mut warm = LoadedWarm::default();
+        let s = r
+            .loaded_sensitivity_warm(&kappa, &base, &target, &mut warm)
+            .unwrap();
+        let p0 = r.fk_loaded(&kappa, &base, &target).unwrap().pose;
+        assert!((s.pose.x - p0.x).abs() < 1e-7 && (s.pose.phi - p0.phi).abs() < 1e-9);
+        let cold = r.load_response(&kappa, &base, &target).unwrap();
+        for (a, b) in s.d_loads.iter().flatten().zip(cold.iter().flatten()) {
+            assert!((a - b).abs() < 1e-5 * b.abs().max(1e-3), "{a} vs {b}");
+        }
+        for i in 0..3 {
+            // Central differences of the cold solve: the derivative to second order.
+            let h = 1e-6;
+            let (mut kp, mut km) = (kappa, kappa);
+            kp[i] += h;
+            km[i] -= h;
+            let pp = r.fk_loaded(&kp, &base, &target).unwrap().pose;
+            let pm = r.fk_loaded(&km, &base, &target).unwrap().pose;
+            let fd = [
+                (pp.x - pm.x) / (2.0 * h),
+                (pp.y - pm.y) / (2.0 * h),
+                (pp.phi - pm.phi) / (2.0 * h),
+            ];
+            for k in 0..3 {
+                let tol = 1e-4 * fd[k].abs().max(s.d_kappa[i][k].abs()) + 1e-6;
+                assert!(
+                    (fd[k] - s.d_kappa[i][k]).abs() < tol,
+                    "leg {i} comp {k}: {} vs {}",
+                    s.d_kappa[i][k],
                     fd[k]
                 );
             }

@@ -61,6 +61,17 @@ impl PartialEq for TendonMap {
     }
 }
 
+/// The j-th root of `a` >= 0 (square and cube roots exact and cheaper than `powf`).
+fn root(a: f64, j: usize) -> f64 {
+    match j {
+        2 => a.sqrt(),
+        3 => a.cbrt(),
+        4 => a.sqrt().sqrt(),
+        6 => a.cbrt().sqrt(),
+        _ => a.powf(1.0 / j as f64),
+    }
+}
+
 #[inline]
 fn odd(dl: f64, v: f64) -> f64 {
     if dl < 0.0 {
@@ -271,7 +282,7 @@ impl TendonMap {
             | TendonMapKind::Root6 => {
                 out[1] = dl;
                 for (j, o) in out.iter_mut().enumerate().take(n).skip(2) {
-                    *o = odd(dl, a.powf(1.0 / j as f64));
+                    *o = odd(dl, root(a, j));
                 }
             }
             TendonMapKind::Log | TendonMapKind::LogAffine => out[1] = odd(dl, a.ln_1p()),
@@ -316,9 +327,11 @@ impl TendonMap {
                 let mut s = k[1];
                 for (j, kj) in k.iter().enumerate().take(self.n).skip(2) {
                     let e = 1.0 / j as f64;
-                    let p = a.powf(e);
+                    let p = root(a, j);
                     v += odd(dl, kj * p);
-                    s += kj * e * a_eff.powf(e - 1.0);
+                    // a^(e - 1) = a^e / a.
+                    let p_eff = if a_eff == a { p } else { root(a_eff, j) };
+                    s += kj * e * p_eff / a_eff;
                 }
                 (v, s)
             }

@@ -1,6 +1,7 @@
 //! The residuals of the current model on every measured row, with what the candidate effects
 //! need to fit against them (the model's Jacobians at each row) and the held-out blocks.
 
+use crate::interpolation::Interpolation;
 use crate::model::{ExtendedModel, Prediction};
 use crate::nuisance::{Nuisance, NuisanceTable};
 use crate::series::{Blocks, Series};
@@ -43,36 +44,13 @@ pub struct Context<'a> {
     loads: std::sync::OnceLock<LoadResponses>,
 }
 
-/// The load responses of every row and how they were interpolated (`None`: every row solved).
-type LoadResponses = (std::sync::Arc<Vec<[[f64; 3]; 5]>>, Option<ResponseCheck>);
+/// The load responses of every row and how they were interpolated (`None`: every row solved,
+/// the exact model).
+type LoadResponses = (std::sync::Arc<Vec<[[f64; 3]; 5]>>, Option<Interpolation>);
 
-/// Largest change of a segment's bending (rad) between two anchor rows of the load responses.
-pub const ANCHOR_BENDING_RAD: f64 = 0.05;
-
-/// Largest distance (a segment's bending, rad) of a row's configuration from the chord between
-/// the anchors it is interpolated between.
-pub const ANCHOR_DEVIATION_RAD: f64 = 0.002;
-
-/// Every this many interpolated rows, one is solved to measure the interpolation error.
-pub const CHECK_EVERY: usize = 25;
-
-/// Largest relative error of the interpolated load responses on the check sample (against the
-/// largest response of each parameter); above it, every row is solved.
-pub const MAX_RESPONSE_ERROR: f64 = 0.02;
-
-/// The interpolation of the load responses, measured.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
-pub struct ResponseCheck {
-    /// Rows solved as anchors.
-    pub anchors: usize,
-    /// Interpolated rows solved to check the interpolation.
-    pub checked: usize,
-    /// Rows solved in all.
-    pub solved: usize,
-    /// Largest error of an interpolated response on the check sample, relative to the largest
-    /// response of that parameter.
-    pub max_relative_error: f64,
-}
+/// Largest error of an interpolated load response, relative to the largest response of that
+/// parameter over the rows solved ([`crate::interpolation`]); a stretch off by more is bisected.
+pub const MAX_RESPONSE_ERROR: f64 = 0.005;
 
 impl<'a> Context<'a> {
     /// Predicts every series with `model` and collects the residuals.
@@ -164,47 +142,34 @@ impl<'a> Context<'a> {
     }
 
     /// The first-order responses of every row's pose to the five load parameters at `loads`
-    /// (computed once per context; the loads are those of the context's model).
+    /// (computed once per context; the loads are those of the context's model): solved at
+    /// every row for an exact model, interpolated along the configuration otherwise
+    /// ([`Context::interpolated_load_responses`]).
     pub fn load_responses(
         &self,
         loads: &pcr_kinematics::statics::Loads,
     ) -> std::sync::Arc<Vec<[[f64; 3]; 5]>> {
         self.loads
             .get_or_init(|| {
-                let exact = |i: usize| self.load_response_at(i, loads);
                 if self.model.exact {
+                    let exact = |i: usize| self.load_response_at(i, loads);
                     return (
-                        std::sync::Arc::new((0..self.rows.len()).into_par_iter().map(exact).collect()),
+                        std::sync::Arc::new(
+                            (0..self.rows.len()).into_par_iter().map(exact).collect(),
+                        ),
                         None,
                     );
                 }
-                let (resp, check) = self.interpolated_load_responses(loads);
-                match check {
-                    Some(c) if c.max_relative_error <= MAX_RESPONSE_ERROR => {
-                        tracing::debug!(
-                            "load responses: {} of {} rows solved ({} anchors, {} checks), \
-                             largest relative interpolation error {:.2e}",
-                            c.solved,
-                            self.rows.len(),
-                            c.anchors,
-                            c.checked,
-                            c.max_relative_error
-                        );
-                        (std::sync::Arc::new(resp), Some(c))
-                    }
-                    _ => {
-                        tracing::debug!(
-                            "load responses: interpolation error {:?} above {MAX_RESPONSE_ERROR}, every row solved",
-                            check.map(|c| c.max_relative_error)
-                        );
-                        (
-                            std::sync::Arc::new(
-                                (0..self.rows.len()).into_par_iter().map(exact).collect(),
-                            ),
-                            None,
-                        )
-                    }
-                }
+                let (resp, st) = self.interpolated_load_responses(loads);
+                tracing::debug!(
+                    "load responses: {} of {} rows solved ({} anchors, {} checks, {} bisected)",
+                    st.solved,
+                    st.rows,
+                    st.anchors,
+                    st.checked,
+                    st.bisected
+                );
+                (std::sync::Arc::new(resp), Some(st))
             })
             .0
             .clone()
@@ -212,7 +177,7 @@ impl<'a> Context<'a> {
 
     /// How the load responses of this context were interpolated (`None` before they are
     /// computed, or when every row was solved).
-    pub fn load_response_check(&self) -> Option<ResponseCheck> {
+    pub fn load_response_check(&self) -> Option<Interpolation> {
         self.loads.get().and_then(|l| l.1)
     }
 
@@ -275,147 +240,72 @@ impl<'a> Context<'a> {
         parts.concat()
     }
 
-    /// The load responses solved at anchor rows (the first row of every series and every row
-    /// whose segments' bending differs from the last anchor's by more than
-    /// [`ANCHOR_BENDING_RAD`]) and interpolated between consecutive anchors along the
-    /// configuration (the projection of a row's curvatures on the segment between the two
-    /// anchors'); rows with the same curvatures as an anchor take its response. The error of
-    /// the interpolation is measured on a check sample of the other rows, solved.
+    /// The load responses interpolated along the configuration of the rows
+    /// ([`crate::interpolation::interpolate`]: solved at the anchors of its path and at the
+    /// middle of every stretch between them, a stretch bisected where the interpolation is off
+    /// by more than [`MAX_RESPONSE_ERROR`] of the largest response of a parameter).
     fn interpolated_load_responses(
         &self,
         loads: &pcr_kinematics::statics::Loads,
-    ) -> (Vec<[[f64; 3]; 5]>, Option<ResponseCheck>) {
-        let n = self.rows.len();
+    ) -> (Vec<[[f64; 3]; 5]>, Interpolation) {
         let lc: [f64; 3] = std::array::from_fn(|i| self.model.robot.legs[i].l_c);
-        let kappa = |i: usize| self.pred(&self.rows[i]).kappa;
-        let bending = |a: &[f64; 3], b: &[f64; 3]| {
-            (0..3)
-                .map(|l| ((a[l] - b[l]) * lc[l]).abs())
-                .fold(0.0, f64::max)
-        };
-        // Anchors: the first and last row of every series, then, between consecutive anchors,
-        // the row farthest (in bending) from where the interpolation would put it, until every
-        // row is within ANCHOR_DEVIATION_RAD of the chord between its anchors and no chord is
-        // longer than ANCHOR_BENDING_RAD (the path of the configuration simplified to a
-        // polyline, Douglas-Peucker).
-        let mut anchor = vec![false; n];
-        let mut stack: Vec<(usize, usize)> = Vec::new();
-        let mut first = 0usize;
-        for i in 0..n {
-            if i + 1 == n || self.rows[i + 1].s != self.rows[i].s {
-                anchor[first] = true;
-                anchor[i] = true;
-                if i > first + 1 {
-                    stack.push((first, i));
-                }
-                first = i + 1;
-            }
-        }
-        let chord_t = |a: usize, b: usize, i: usize| {
-            let (ka, kb, k) = (kappa(a), kappa(b), kappa(i));
-            let d: [f64; 3] = std::array::from_fn(|l| (kb[l] - ka[l]) * lc[l]);
-            let dd: f64 = d.iter().map(|v| v * v).sum();
-            let t = if dd > 0.0 {
-                ((0..3).map(|l| (k[l] - ka[l]) * lc[l] * d[l]).sum::<f64>() / dd).clamp(0.0, 1.0)
-            } else {
-                0.0
-            };
-            let dev = (0..3)
-                .map(|l| ((k[l] - ka[l] - t * (kb[l] - ka[l])) * lc[l]).abs())
-                .fold(0.0, f64::max);
-            (t, dev)
-        };
-        while let Some((a, b)) = stack.pop() {
-            let mut worst = (0.0f64, a);
-            for i in a + 1..b {
-                let (_, dev) = chord_t(a, b, i);
-                if dev > worst.0 {
-                    worst = (dev, i);
-                }
-            }
-            let split = if worst.0 > ANCHOR_DEVIATION_RAD {
-                Some(worst.1)
-            } else if bending(&kappa(a), &kappa(b)) > ANCHOR_BENDING_RAD {
-                Some((a + b) / 2)
-            } else {
-                None
-            };
-            if let Some(m) = split.filter(|&m| m > a && m < b) {
-                anchor[m] = true;
-                if m > a + 1 {
-                    stack.push((a, m));
-                }
-                if b > m + 1 {
-                    stack.push((m, b));
-                }
-            }
-        }
-        let mut out = vec![[[0.0; 3]; 5]; n];
-        let mut solved = 0usize;
-        let mut anchors = 0usize;
-        let mut scale = [0.0f64; 5];
-        let idx: Vec<usize> = (0..n).filter(|&i| anchor[i]).collect();
-        let solved_at = self.load_responses_warm(&idx, loads);
-        for (&i, r) in idx.iter().zip(solved_at) {
-            out[i] = r;
-            for (sc, r) in scale.iter_mut().zip(&out[i]) {
-                *sc = sc.max(r.iter().map(|v| v * v).sum::<f64>().sqrt());
-            }
-            solved += 1;
-            anchors += 1;
-        }
-        // Between anchors a < b of one series.
-        for w in idx.windows(2) {
-            let (a, b) = (w[0], w[1]);
-            if self.rows[a].s != self.rows[b].s {
-                continue;
-            }
-            for i in a + 1..b {
-                let (t, _) = chord_t(a, b, i);
-                let (ra, rb) = (&out[a], &out[b]);
-                out[i] = std::array::from_fn(|j| {
-                    std::array::from_fn(|c| ra[j][c] + t * (rb[j][c] - ra[j][c]))
-                });
-            }
-        }
-        // The check sample: every CHECK_EVERY-th interpolated row with a prediction, solved.
-        let mut worst = 0.0f64;
-        let mut checked = 0usize;
-        let mut errs: Vec<[f64; 5]> = Vec::new();
-        let sample: Vec<usize> = (0..n)
-            .filter(|&i| !anchor[i] && self.pred(&self.rows[i]).pose.is_some())
-            .step_by(CHECK_EVERY)
+        let cfg: Vec<[f64; 3]> = self
+            .rows
+            .iter()
+            .map(|r| {
+                let k = self.pred(r).kappa;
+                std::array::from_fn(|l| k[l] * lc[l])
+            })
             .collect();
-        let exact = self.load_responses_warm(&sample, loads);
-        for (&i, e) in sample.iter().zip(exact) {
-            solved += 1;
-            checked += 1;
-            let mut err = [0.0; 5];
-            for j in 0..5 {
-                let norm = e[j].iter().map(|v| v * v).sum::<f64>().sqrt();
-                scale[j] = scale[j].max(norm);
-                err[j] = (0..3)
-                    .map(|c| (out[i][j][c] - e[j][c]).powi(2))
-                    .sum::<f64>()
-                    .sqrt();
-            }
-            errs.push(err);
-            out[i] = e;
-        }
-        for err in &errs {
-            for j in 0..5 {
-                if scale[j] > 0.0 {
-                    worst = worst.max(err[j] / scale[j]);
+        let breaks: Vec<bool> = (0..self.rows.len())
+            .map(|i| i > 0 && self.rows[i].s != self.rows[i - 1].s)
+            .collect();
+        // The largest response of each parameter over the rows solved so far.
+        let scale = std::cell::Cell::new([0.0f64; 5]);
+        let flat = |r: &[[f64; 3]; 5]| -> [f64; 15] { std::array::from_fn(|j| r[j / 3][j % 3]) };
+        let mut solve = |idx: &[usize]| -> Vec<Option<[f64; 15]>> {
+            let have: Vec<usize> = idx
+                .iter()
+                .copied()
+                .filter(|&i| self.pred(&self.rows[i]).pose.is_some())
+                .collect();
+            let solved = self.load_responses_warm(&have, loads);
+            let mut sc = scale.get();
+            for r in &solved {
+                for (s, c) in sc.iter_mut().zip(r) {
+                    *s = s.max(c.iter().map(|v| v * v).sum::<f64>().sqrt());
                 }
             }
-        }
-        let check = (checked > 0 || anchors == n).then_some(ResponseCheck {
-            anchors,
-            checked,
-            solved,
-            max_relative_error: worst,
-        });
-        (out, check)
+            scale.set(sc);
+            let mut it = solved.iter();
+            idx.iter()
+                .map(|&i| {
+                    self.pred(&self.rows[i])
+                        .pose
+                        .and_then(|_| it.next().map(flat))
+                })
+                .collect()
+        };
+        let within = |a: &[f64; 15], b: &[f64; 15]| {
+            let sc = scale.get();
+            (0..5).all(|j| {
+                let e = (0..3)
+                    .map(|c| (a[3 * j + c] - b[3 * j + c]).powi(2))
+                    .sum::<f64>();
+                e.sqrt() <= MAX_RESPONSE_ERROR * sc[j]
+            })
+        };
+        let (vals, st) =
+            crate::interpolation::interpolate::<15>(&cfg, &breaks, &mut solve, &within);
+        let out = vals
+            .into_iter()
+            .map(|v| {
+                v.map_or([[0.0; 3]; 5], |v| {
+                    std::array::from_fn(|j| std::array::from_fn(|c| v[3 * j + c]))
+                })
+            })
+            .collect();
+        (out, st)
     }
 
     /// The prediction of a row.

@@ -17,6 +17,7 @@ pub mod effects;
 pub mod extension;
 pub mod features;
 pub mod fitted;
+pub mod interpolation;
 pub mod linear;
 pub mod model;
 pub mod nuisance;

@@ -29,6 +29,13 @@ use rayon::prelude::*;
 /// Rows of a series solved in one pass (warm-started from row to row) by one thread.
 pub const PREDICT_CHUNK: usize = 2048;
 
+/// Largest error (mm) of an interpolated deflection of the platform position by the loads, on
+/// the middle row of a stretch ([`crate::interpolation`]); a stretch off by more is bisected.
+pub const DEFLECTION_TOLERANCE_MM: f64 = 1e-3;
+
+/// Largest error (rad) of an interpolated deflection of the platform orientation.
+pub const DEFLECTION_TOLERANCE_RAD: f64 = 2e-5;
+
 /// The prediction for one row.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Prediction {
@@ -46,6 +53,19 @@ pub struct Prediction {
     pub j_kappa: Matrix3<f64>,
 }
 
+/// A row's predicted pose and its first-order responses ([`ExtendedModel::sensitivities`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Sensitivity {
+    /// Predicted pose (x mm, y mm, phi rad).
+    pub pose: [f64; 3],
+    /// The curvatures it was predicted at, 1/mm.
+    pub kappa: [f64; 3],
+    /// d pose / d kappa (rows x mm, y mm, phi rad), under the model's loads.
+    pub d_kappa: Matrix3<f64>,
+    /// d pose / d (force x N, force y N, couple N mm, k_M, k_P N mm/rad); zero unloaded.
+    pub d_loads: [[f64; 3]; 5],
+}
+
 /// The model of one robot file.
 #[derive(Debug, Clone)]
 pub struct ExtendedModel {
@@ -58,6 +78,11 @@ pub struct ExtendedModel {
     /// Every row solved on its own (no reuse of the previous row's configuration or
     /// equilibrium): the reference the fast path is tested against.
     pub exact: bool,
+    /// Loaded rows between solved ones take the loads' deflection interpolated along the
+    /// configuration (the default); off, every row is solved (still warm-started). A model
+    /// whose predictions are differentiated by its parameters (the refinement's forward
+    /// differences) solves every row: an interpolation's stretches depend on the parameters.
+    pub interpolate: bool,
     /// The effects' parts of the prediction ([`crate::effects::chain`]).
     pub chain: Chain,
 }
@@ -77,6 +102,7 @@ impl ExtendedModel {
             robot,
             config: config.clone(),
             exact: false,
+            interpolate: true,
             chain,
         })
     }
@@ -109,6 +135,20 @@ impl ExtendedModel {
         s: &Series,
         want: &(dyn Fn(usize) -> bool + Sync),
     ) -> Vec<Prediction> {
+        let (q_eff, dl_eff, mmps) = self.tendons(s);
+        let n = s.samples.len();
+        let chunk = if self.exact { n.max(1) } else { PREDICT_CHUNK };
+        let starts: Vec<usize> = (0..n).step_by(chunk).collect();
+        let parts: Vec<Vec<Prediction>> = starts
+            .par_iter()
+            .map(|&k0| self.predict_range(s, k0..(k0 + chunk).min(n), &q_eff, &dl_eff, &mmps, want))
+            .collect();
+        parts.concat()
+    }
+
+    /// Stages 1 to 4 of every row of a series: the effective motor positions (steps), the
+    /// effective tendon displacements (mm), and the legs' mm per step.
+    fn tendons(&self, s: &Series) -> (Vec<[f64; 3]>, Vec<[f64; 3]>, [f64; 3]) {
         let e = &self.config.effects;
         let q_eff = self.effective_steps(s, e);
         let mmps: [f64; 3] = std::array::from_fn(|i| self.config.legs[i].actuation.mm_per_step());
@@ -119,14 +159,242 @@ impl ExtendedModel {
         for x in self.chain {
             x.tendons(e, s, &mut dl_eff);
         }
-        let n = s.samples.len();
-        let chunk = if self.exact { n.max(1) } else { PREDICT_CHUNK };
-        let starts: Vec<usize> = (0..n).step_by(chunk).collect();
-        let parts: Vec<Vec<Prediction>> = starts
-            .par_iter()
-            .map(|&k0| self.predict_range(s, k0..(k0 + chunk).min(n), &q_eff, &dl_eff, &mmps, want))
+        (q_eff, dl_eff, mmps)
+    }
+
+    /// The curvatures of the rows `rows` of a series (stages 1 to 5 up to the tendon map, the
+    /// histories over every row; no kinematics), in the order of `rows`.
+    pub fn curvatures(&self, s: &Series, rows: &[usize]) -> Vec<[f64; 3]> {
+        let (_, dl_eff, _) = self.tendons(s);
+        rows.iter()
+            .map(|&k| std::array::from_fn(|i| self.robot.legs[i].map.kappa(dl_eff[k][i])))
+            .collect()
+    }
+
+    /// The predicted pose of the rows `rows` of a series (ascending) with its first-order
+    /// responses to the curvatures and, when the model is loaded, to the five load parameters
+    /// ([`pcr_kinematics::Robot::loaded_sensitivity_warm`]): the derivative of the prediction
+    /// with respect to any parameter that acts through the curvatures or the loads, without
+    /// solving the kinematics again per parameter. `None` where the model has no pose. The
+    /// rows are solved in chunks in parallel, each warm-started along the chunk from the
+    /// measured poses.
+    pub fn sensitivities(&self, s: &Series, rows: &[usize]) -> Vec<Option<Sensitivity>> {
+        const CHUNK: usize = 256;
+        let kappa = self.curvatures(s, rows);
+        let parts: Vec<Vec<Option<Sensitivity>>> = rows
+            .par_chunks(CHUNK)
+            .zip(kappa.par_chunks(CHUNK))
+            .map(|(c, kc)| {
+                let mut warm = pcr_kinematics::statics::LoadedWarm::default();
+                let mut guess = s.samples[..=c[0].min(s.samples.len() - 1)]
+                    .iter()
+                    .rev()
+                    .find_map(|x| x.pose)
+                    .map_or(Pose::default(), |p| Pose::new(p[0], p[1], p[2]));
+                c.iter()
+                    .zip(kc)
+                    .map(|(&k, &kp)| {
+                        if let Some(p) = s.samples[k].pose {
+                            guess = Pose::new(p[0], p[1], p[2]);
+                        }
+                        let out = match &self.loads {
+                            Some(l) => self
+                                .robot
+                                .loaded_sensitivity_warm(&kp, l, &guess, &mut warm)
+                                .ok()
+                                .map(|x| Sensitivity {
+                                    pose: [x.pose.x, x.pose.y, x.pose.phi],
+                                    kappa: kp,
+                                    d_kappa: Matrix3::from_fn(|r, c| x.d_kappa[c][r]),
+                                    d_loads: x.d_loads,
+                                }),
+                            None => self.robot.fk_warm(&kp, &guess).ok().and_then(|p| {
+                                Some(Sensitivity {
+                                    pose: [p.x, p.y, p.phi],
+                                    kappa: kp,
+                                    d_kappa: self.robot.jacobian(&p, &kp)?,
+                                    d_loads: [[0.0; 3]; 5],
+                                })
+                            }),
+                        };
+                        if let Some(x) = &out {
+                            guess = Pose::new(x.pose[0], x.pose[1], x.pose[2]);
+                        }
+                        out
+                    })
+                    .collect()
+            })
             .collect();
         parts.concat()
+    }
+
+    /// d pose / d q_eff and d pose / d kappa of a row at `pose` (the rigid kinematics).
+    fn jacobians(
+        &self,
+        pose: &Pose,
+        kappa: &[f64; 3],
+        dl_eff: &[f64; 3],
+        mmps: &[f64; 3],
+    ) -> (Matrix3<f64>, Matrix3<f64>) {
+        let jk = self
+            .robot
+            .jacobian(pose, kappa)
+            .unwrap_or_else(Matrix3::zeros);
+        let d = Matrix3::from_diagonal(&nalgebra::Vector3::from(std::array::from_fn::<f64, 3, _>(
+            |i| {
+                // The slope over one motor step: the root maps' slope is infinite at dl = 0, a
+                // step is the smallest change there is.
+                let m = &self.robot.legs[i].map;
+                let h = 0.5 * mmps[i];
+                let dl = dl_eff[i];
+                (m.kappa(dl + h) - m.kappa(dl - h)) / (2.0 * h) * mmps[i]
+            },
+        )));
+        (jk * d, jk)
+    }
+
+    /// [`ExtendedModel::predict_range`] for a loaded model: the rigid kinematics at every row,
+    /// the loads' deflection of the pose (loaded less rigid) solved where
+    /// [`crate::interpolation::interpolate`] says (the anchors of the configuration's path and
+    /// the middle of every stretch between them) and interpolated along the configuration
+    /// elsewhere, each stretch checked to [`DEFLECTION_TOLERANCE_MM`] (position) and
+    /// [`DEFLECTION_TOLERANCE_RAD`].
+    fn predict_range_loaded(
+        &self,
+        s: &Series,
+        range: std::ops::Range<usize>,
+        q_eff: &[[f64; 3]],
+        dl_eff: &[[f64; 3]],
+        mmps: &[f64; 3],
+        want: &(dyn Fn(usize) -> bool + Sync),
+    ) -> Vec<Prediction> {
+        let Some(loads) = &self.loads else {
+            return Vec::new();
+        };
+        let k0 = range.start;
+        let mut guess = s.samples[..=k0.min(s.samples.len().saturating_sub(1))]
+            .iter()
+            .rev()
+            .find_map(|x| x.pose)
+            .or_else(|| s.samples.iter().find_map(|x| x.pose))
+            .map_or(Pose::default(), |p| Pose::new(p[0], p[1], p[2]));
+        let mut out: Vec<Prediction> = Vec::with_capacity(range.len());
+        // The rows whose loaded equilibrium is needed (a row at rest takes its predecessor's).
+        let mut unique: Vec<usize> = Vec::new();
+        let mut source: Vec<Option<usize>> = Vec::with_capacity(range.len());
+        for k in range.clone() {
+            let smp = &s.samples[k];
+            let kappa: [f64; 3] =
+                std::array::from_fn(|i| self.robot.legs[i].map.kappa(dl_eff[k][i]));
+            if let Some(p) = smp.pose {
+                guess = Pose::new(p[0], p[1], p[2]);
+            }
+            let mut pred = Prediction {
+                pose: None,
+                q_eff: q_eff[k],
+                dl_eff: dl_eff[k],
+                kappa,
+                j_q: Matrix3::zeros(),
+                j_kappa: Matrix3::zeros(),
+            };
+            if !want(k) {
+                out.push(pred);
+                source.push(None);
+                continue;
+            }
+            if let Some(&Some(prev)) = source.last() {
+                let p: &Prediction = &out[prev - k0];
+                if p.pose.is_some() && p.kappa == kappa && p.dl_eff == dl_eff[k] {
+                    pred.pose = p.pose;
+                    out.push(pred);
+                    source.push(Some(prev));
+                    continue;
+                }
+            }
+            let rigid = self.robot.fk_warm(&kappa, &guess).ok();
+            if let Some(r) = rigid {
+                guess = r;
+                unique.push(k);
+                source.push(Some(k));
+            } else {
+                source.push(None);
+            }
+            pred.pose = rigid.map(|p| [p.x, p.y, p.phi]);
+            out.push(pred);
+        }
+        let lc: [f64; 3] = std::array::from_fn(|i| self.robot.legs[i].l_c);
+        let cfg: Vec<[f64; 3]> = unique
+            .iter()
+            .map(|&k| std::array::from_fn(|l| out[k - k0].kappa[l] * lc[l]))
+            .collect();
+        let breaks = vec![false; unique.len()];
+        let mut solve = |idx: &[usize]| -> Vec<Option<[f64; 3]>> {
+            let mut warm = pcr_kinematics::statics::LoadedWarm::default();
+            idx.iter()
+                .map(|&u| {
+                    let k = unique[u];
+                    let p = &out[k - k0];
+                    let rigid = p.pose?;
+                    let guess = s.samples[k]
+                        .pose
+                        .map_or(Pose::new(rigid[0], rigid[1], rigid[2]), |m| {
+                            Pose::new(m[0], m[1], m[2])
+                        });
+                    let e = self
+                        .robot
+                        .fk_loaded_warm(&p.kappa, loads, &guess, &mut warm)
+                        .or_else(|_| self.robot.fk_loaded(&p.kappa, loads, &guess))
+                        .ok()?;
+                    Some([
+                        e.pose.x - rigid[0],
+                        e.pose.y - rigid[1],
+                        e.pose.phi - rigid[2],
+                    ])
+                })
+                .collect()
+        };
+        let within = |a: &[f64; 3], b: &[f64; 3]| {
+            (a[0] - b[0]).abs() <= DEFLECTION_TOLERANCE_MM
+                && (a[1] - b[1]).abs() <= DEFLECTION_TOLERANCE_MM
+                && (a[2] - b[2]).abs() <= DEFLECTION_TOLERANCE_RAD
+        };
+        let (deflection, st) =
+            crate::interpolation::interpolate::<3>(&cfg, &breaks, &mut solve, &within);
+        tracing::trace!(
+            "loaded rows {}..{}: {} of {} solved ({} anchors, {} checks, {} bisected)",
+            range.start,
+            range.end,
+            st.solved,
+            st.rows,
+            st.anchors,
+            st.checked,
+            st.bisected
+        );
+        for (&k, d) in unique.iter().zip(deflection) {
+            let p = &mut out[k - k0];
+            p.pose = match (p.pose, d) {
+                (Some(r), Some(d)) => Some([r[0] + d[0], r[1] + d[1], r[2] + d[2]]),
+                _ => None,
+            };
+            if let Some(q) = p.pose {
+                let (j_q, j_kappa) =
+                    self.jacobians(&Pose::new(q[0], q[1], q[2]), &p.kappa, &p.dl_eff, mmps);
+                p.j_q = j_q;
+                p.j_kappa = j_kappa;
+            }
+        }
+        for (i, src) in source.iter().enumerate() {
+            if let Some(j) = *src {
+                if j - k0 != i {
+                    let from = out[j - k0];
+                    let p = &mut out[i];
+                    p.pose = from.pose;
+                    p.j_q = from.j_q;
+                    p.j_kappa = from.j_kappa;
+                }
+            }
+        }
+        out
     }
 
     /// Predictions for the rows `range` of a series from their effective motor positions and
@@ -140,6 +408,9 @@ impl ExtendedModel {
         mmps: &[f64; 3],
         want: &(dyn Fn(usize) -> bool + Sync),
     ) -> Vec<Prediction> {
+        if self.loads.is_some() && !self.exact && self.interpolate {
+            return self.predict_range_loaded(s, range, q_eff, dl_eff, mmps, want);
+        }
         let mut out: Vec<Prediction> = Vec::with_capacity(range.len());
         let mut warm = pcr_kinematics::statics::LoadedWarm::default();
         // Started at the last measured pose at or before the range (the first of the series).
@@ -191,27 +462,10 @@ impl ExtendedModel {
                     .map(|e| e.pose),
                 None => self.robot.fk_warm(&kappa, &guess).ok(),
             };
-            let (j_q, j_kappa) =
-                match &pose {
-                    Some(p) => {
-                        let jk = self
-                            .robot
-                            .jacobian(p, &kappa)
-                            .unwrap_or_else(Matrix3::zeros);
-                        let d = Matrix3::from_diagonal(&nalgebra::Vector3::from(
-                            std::array::from_fn::<f64, 3, _>(|i| {
-                                // The slope over one motor step: the root maps' slope is
-                                // infinite at dl = 0, a step is the smallest change there is.
-                                let m = &self.robot.legs[i].map;
-                                let h = 0.5 * mmps[i];
-                                let dl = dl_eff[k][i];
-                                (m.kappa(dl + h) - m.kappa(dl - h)) / (2.0 * h) * mmps[i]
-                            }),
-                        ));
-                        (jk * d, jk)
-                    }
-                    None => (Matrix3::zeros(), Matrix3::zeros()),
-                };
+            let (j_q, j_kappa) = match &pose {
+                Some(p) => self.jacobians(p, &kappa, &dl_eff[k], mmps),
+                None => (Matrix3::zeros(), Matrix3::zeros()),
+            };
             if let Some(p) = pose {
                 guess = p;
             }

@@ -12,7 +12,7 @@
 
 use crate::context::{wrap, Context};
 use crate::effects::{self, Parameter};
-use crate::model::ExtendedModel;
+use crate::model::{ExtendedModel, Sensitivity};
 use crate::nuisance::Nuisance;
 use crate::series::{Blocks, Series};
 use pcr_calibration::lsq::{self, Options, Problem};
@@ -108,14 +108,120 @@ impl Refit<'_> {
         c
     }
 
-    /// The full model's residuals with the effects at `x` (calibration parameters as in
-    /// `base`) into the first 3 n entries of `r`.
-    fn effect_residuals(&self, x: &[f64], r: &mut [f64]) -> Result<(), String> {
+    /// The model with the effects at `x` (calibration parameters as in `base`).
+    fn effects_model(&self, x: &[f64]) -> Result<ExtendedModel, String> {
         let mut c = self.base.clone();
         for (s, v) in self.slots.iter().zip(x) {
             (s.set)(&mut c.effects, s.index, *v);
         }
-        let model = ExtendedModel::like(&c, self.like).map_err(|e| e.0)?;
+        let mut m = ExtendedModel::like(&c, self.like).map_err(|e| e.0)?;
+        m.interpolate = false;
+        Ok(m)
+    }
+
+    /// The effects' columns of the Jacobian at `x` into the first 3 n rows of `j`'s first
+    /// columns. A parameter acts on a row through the curvatures (timing, transmission, play,
+    /// tendons, map), the loads, or the correction of the measurement; the kinematics are
+    /// solved once, at `x`, with their responses to the curvatures and the loads
+    /// ([`ExtendedModel::sensitivities`]), and each parameter's column is its forward
+    /// difference through the cheap stages times those responses. A parameter that changes
+    /// what the responses do not cover (the bending stiffness, or the springs' rest angles
+    /// through the map) gets the forward difference of the full model.
+    fn effect_columns(
+        &self,
+        x: &[f64],
+        upper: &[f64],
+        j: &mut nalgebra::DMatrix<f64>,
+    ) -> Result<(), String> {
+        let model = self.effects_model(x)?;
+        let sens: Vec<Vec<Option<Sensitivity>>> = self
+            .series
+            .iter()
+            .zip(&self.rows)
+            .map(|(s, rows)| model.sensitivities(s, rows))
+            .collect();
+        let springs = model.loads.is_some_and(|l| l.k_m != 0.0 || l.k_p != 0.0);
+        let rest = springs.then(|| model.robot.home_joint_angles());
+        let eps = f64::EPSILON.sqrt();
+        let mut xp = x.to_vec();
+        let mut fd_base: Option<Vec<f64>> = None;
+        for p in 0..x.len() {
+            let mut h = eps * x[p].abs().max(1.0);
+            if x[p] + h > upper[p] {
+                h = -h;
+            }
+            xp[p] = x[p] + h;
+            let h = xp[p] - x[p];
+            let mk = self.effects_model(&xp)?;
+            let dloads = match (&model.loads, &mk.loads) {
+                (None, None) => Some([0.0; 5]),
+                (Some(a), Some(b))
+                    if a.ei == b.ei && rest.is_none_or(|r| r == mk.robot.home_joint_angles()) =>
+                {
+                    Some([
+                        b.force[0] - a.force[0],
+                        b.force[1] - a.force[1],
+                        b.couple - a.couple,
+                        b.k_m - a.k_m,
+                        b.k_p - a.k_p,
+                    ])
+                }
+                _ => None,
+            };
+            match dloads {
+                Some(dl) => {
+                    let mut k = 0;
+                    for ((s, rows), sens) in self.series.iter().zip(&self.rows).zip(&sens) {
+                        let kappa = mk.curvatures(s, rows);
+                        for ((&i, sn), kappa) in rows.iter().zip(sens).zip(&kappa) {
+                            let col = match (s.samples[i].pose, sn) {
+                                (Some(m), Some(sn)) => {
+                                    let (m0, m1) = (model.corrected(m), mk.corrected(m));
+                                    let dk = nalgebra::Vector3::from(std::array::from_fn(|l| {
+                                        kappa[l] - sn.kappa[l]
+                                    }));
+                                    let mut dp = sn.d_kappa * dk;
+                                    for (c, d) in sn.d_loads.iter().zip(&dl) {
+                                        dp += nalgebra::Vector3::from(*c) * *d;
+                                    }
+                                    [
+                                        (m1[0] - m0[0] - dp[0]) / h,
+                                        (m1[1] - m0[1] - dp[1]) / h,
+                                        self.w_phi * (wrap(m1[2] - m0[2]) - dp[2]) / h,
+                                    ]
+                                }
+                                _ => [0.0; 3],
+                            };
+                            for c in 0..3 {
+                                j[(3 * k + c, p)] = col[c];
+                            }
+                            k += 1;
+                        }
+                    }
+                }
+                None => {
+                    if fd_base.is_none() {
+                        let mut b = vec![0.0; 3 * self.n];
+                        self.effect_residuals(x, &mut b)?;
+                        fd_base = Some(b);
+                    }
+                    let base = fd_base.as_deref().unwrap_or_default();
+                    let mut rp = vec![0.0; 3 * self.n];
+                    self.effect_residuals(&xp, &mut rp)?;
+                    for i in 0..3 * self.n {
+                        j[(i, p)] = (rp[i] - base[i]) / h;
+                    }
+                }
+            }
+            xp[p] = x[p];
+        }
+        Ok(())
+    }
+
+    /// The full model's residuals with the effects at `x` (calibration parameters as in
+    /// `base`) into the first 3 n entries of `r`.
+    fn effect_residuals(&self, x: &[f64], r: &mut [f64]) -> Result<(), String> {
+        let model = self.effects_model(x)?;
         let mut k = 0;
         for (s, rows) in self.series.iter().zip(&self.rows) {
             let want: std::collections::HashSet<usize> = rows.iter().copied().collect();
@@ -167,53 +273,22 @@ impl Problem for Refit<'_> {
         Ok(())
     }
 
-    /// Forward differences for the effects (the full model); the calibration parameters'
-    /// columns are the linearisation's own.
+    /// The effects' columns from the kinematics' responses ([`Refit::effect_columns`]); the
+    /// calibration parameters' columns are the linearisation's own.
     fn jacobian(
         &mut self,
         x: &[f64],
-        r: &[f64],
+        _r: &[f64],
         upper: &[f64],
         j: &mut nalgebra::DMatrix<f64>,
     ) -> Result<(), String> {
         let ne = self.n_effects();
-        let Some(l) = self.nuisance.take() else {
-            return lsq::forward_difference(self, x, r, upper, j);
+        j.fill(0.0);
+        self.effect_columns(&x[..ne], &upper[..ne], j)?;
+        let Some(l) = &self.nuisance else {
+            return Ok(());
         };
-        let eps = f64::EPSILON.sqrt();
-        let mut xp = x.to_vec();
-        let mut rp = vec![0.0; r.len()];
-        let mut out = Ok(());
-        let mut base = vec![0.0; 3 * self.n];
-        if let Err(e) = self.effect_residuals(&x[..ne], &mut base) {
-            self.nuisance = Some(l);
-            return Err(e);
-        }
-        for k in 0..ne {
-            let mut h = eps * x[k].abs().max(1.0);
-            if x[k] + h > upper[k] {
-                h = -h;
-            }
-            xp[k] = x[k] + h;
-            let h = xp[k] - x[k];
-            // The nuisance's part of the residual is the same at x and xp: the difference of
-            // the full model's residuals alone is the column.
-            if let Err(e) = self.effect_residuals(&xp[..ne], &mut rp) {
-                out = Err(e);
-                break;
-            }
-            for i in 0..3 * self.n {
-                j[(i, k)] = (rp[i] - base[i]) / h;
-            }
-            for i in 3 * self.n..r.len() {
-                j[(i, k)] = 0.0;
-            }
-            xp[k] = x[k];
-        }
         for gj in 0..l.n() {
-            for i in 0..r.len() {
-                j[(i, ne + gj)] = 0.0;
-            }
             for (k, cols) in l.cols.iter().enumerate() {
                 let Some(cols) = cols else { continue };
                 for c in 0..3 {
@@ -222,8 +297,7 @@ impl Problem for Refit<'_> {
             }
             j[(3 * self.n + gj, ne + gj)] = l.prior_sqrt[gj];
         }
-        self.nuisance = Some(l);
-        out
+        Ok(())
     }
 }
 
