@@ -28,12 +28,19 @@ pub enum Parts {
     /// One recording against the others, or the first against the second half of the training
     /// time when there is one recording.
     Halves,
+    /// Static against moving rows, and then, for each leg, the rows where it bends less than
+    /// its median against those where it bends more: a load or a stiffness is the same over
+    /// the whole workspace, while an imitation of a cause that depends on the configuration
+    /// (a tendon pulling on another leg's) is not.
+    Workspace,
+    /// Leg i's bending below its median over the rows against above it.
+    Bending(usize),
 }
 
 /// Fewest training rows a part needs for the check (fewer: not checked).
 pub const MIN_ROWS: usize = 400;
 /// Combined standard errors two parts' values must differ by to disagree.
-pub const Z: f64 = 4.0;
+pub const Z: f64 = 3.5;
 /// Share of the larger value two parts' values must differ by to disagree.
 pub const REL: f64 = 0.35;
 
@@ -46,7 +53,20 @@ pub fn split(
 ) -> Option<([Vec<usize>; 2], [&'static str; 2])> {
     let sample = |i: usize| &ctx.series[ctx.rows[i].s].samples[ctx.rows[i].k];
     let (a, b, names): (Vec<usize>, Vec<usize>, [&'static str; 2]) = match parts {
-        Parts::StaticMoving => {
+        Parts::Bending(leg) => {
+            let bending = |i: usize| ctx.pred(&ctx.rows[i]).kappa[leg.min(2)];
+            let mut v: Vec<f64> = train.iter().map(|&i| bending(i)).collect();
+            v.sort_by(f64::total_cmp);
+            let median = *v.get(v.len() / 2)?;
+            let (a, b) = train.iter().partition(|&&i| bending(i) < median);
+            const NAMES: [[&str; 2]; 3] = [
+                ["the poses where leg 1 bends less", "those where it bends more"],
+                ["the poses where leg 2 bends less", "those where it bends more"],
+                ["the poses where leg 3 bends less", "those where it bends more"],
+            ];
+            (a, b, NAMES[leg.min(2)])
+        }
+        Parts::StaticMoving | Parts::Workspace => {
             let (a, b) = train.iter().partition(|&&i| sample(i).settled);
             (a, b, ["static rows", "moving rows"])
         }
@@ -85,18 +105,29 @@ pub fn inconsistency(
     train: &[usize],
     whole: &[Estimate],
 ) -> Option<String> {
-    let (parts, names) = split(effect.consistency(), ctx, train)?;
-    let fa = effect.fit_like(ctx, &parts[0], whole)?;
-    let fb = effect.fit_like(ctx, &parts[1], whole)?;
-    let disagree = disagreements(whole, &fa.params, &fb.params);
-    (!disagree.is_empty()).then(|| {
-        format!(
-            "acts partly like {}, but its parameters disagree between {} and {} ({})",
-            effect.name(),
-            names[0],
-            names[1],
-            disagree.join("; ")
-        )
+    let checks: Vec<Parts> = match effect.consistency() {
+        Parts::Workspace => vec![
+            Parts::StaticMoving,
+            Parts::Bending(0),
+            Parts::Bending(1),
+            Parts::Bending(2),
+        ],
+        p => vec![p],
+    };
+    checks.into_iter().find_map(|p| {
+        let (parts, names) = split(p, ctx, train)?;
+        let fa = effect.fit_like(ctx, &parts[0], whole)?;
+        let fb = effect.fit_like(ctx, &parts[1], whole)?;
+        let disagree = disagreements(whole, &fa.params, &fb.params);
+        (!disagree.is_empty()).then(|| {
+            format!(
+                "acts partly like {}, but its parameters disagree between {} and {} ({})",
+                effect.name(),
+                names[0],
+                names[1],
+                disagree.join("; ")
+            )
+        })
     })
 }
 

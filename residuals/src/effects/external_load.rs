@@ -22,6 +22,10 @@ impl Extension for ExternalLoad {
 }
 
 impl Effect for ExternalLoad {
+    fn consistency(&self) -> crate::consistency::Parts {
+        crate::consistency::Parts::Workspace
+    }
+
     fn name(&self) -> &'static str {
         "external_load"
     }

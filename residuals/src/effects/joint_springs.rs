@@ -24,6 +24,10 @@ impl Extension for JointSprings {
 }
 
 impl Effect for JointSprings {
+    fn consistency(&self) -> crate::consistency::Parts {
+        crate::consistency::Parts::Workspace
+    }
+
     fn name(&self) -> &'static str {
         "joint_springs"
     }
