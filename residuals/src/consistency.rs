@@ -9,7 +9,9 @@
 //! The parts ([`Parts`]) are the static rows against the moving rows for the effects visible in
 //! both, and for the effects only motion shows (latency, backlash, creep) one recording against
 //! the others, or the first against the second half of the training time when there is one
-//! recording. The candidate is fitted on each part as on the whole (with the calibration
+//! recording; a load and the joint springs also over the workspace ([`Parts::Workspace`]: for
+//! each leg, the poses where it bends less than its median against those where it bends more,
+//! the first disagreement refusing them). The candidate is fitted on each part as on the whole (with the calibration
 //! parameters), and a parameter disagrees when it is clearly non-zero in the whole fit and the
 //! two parts' values differ by more than [`Z`] combined standard errors *and* by more than
 //! [`REL`] of the larger of the two and the whole's value (the standard errors of a linear fit over thousands of
@@ -60,9 +62,18 @@ pub fn split(
             let median = *v.get(v.len() / 2)?;
             let (a, b) = train.iter().partition(|&&i| bending(i) < median);
             const NAMES: [[&str; 2]; 3] = [
-                ["the poses where leg 1 bends less", "those where it bends more"],
-                ["the poses where leg 2 bends less", "those where it bends more"],
-                ["the poses where leg 3 bends less", "those where it bends more"],
+                [
+                    "the poses where leg 1 bends less",
+                    "those where it bends more",
+                ],
+                [
+                    "the poses where leg 2 bends less",
+                    "those where it bends more",
+                ],
+                [
+                    "the poses where leg 3 bends less",
+                    "those where it bends more",
+                ],
             ];
             (a, b, NAMES[leg.min(2)])
         }

@@ -328,10 +328,19 @@ impl ExtendedModel {
             .map(|&k| std::array::from_fn(|l| out[k - k0].kappa[l] * lc[l]))
             .collect();
         let breaks = vec![false; unique.len()];
+        // Each row solved keeps its solver state: a row is started from the state of the
+        // nearest row solved before it (the middle of a stretch from the stretch's start),
+        // where the configuration is closest.
+        let mut states: std::collections::BTreeMap<usize, pcr_kinematics::statics::LoadedWarm> =
+            std::collections::BTreeMap::new();
         let mut solve = |idx: &[usize]| -> Vec<Option<[f64; 3]>> {
-            let mut warm = pcr_kinematics::statics::LoadedWarm::default();
             idx.iter()
                 .map(|&u| {
+                    let mut warm = states
+                        .range(..u)
+                        .next_back()
+                        .map(|(_, w)| w.clone())
+                        .unwrap_or_default();
                     let k = unique[u];
                     let p = &out[k - k0];
                     let rigid = p.pose?;
@@ -345,6 +354,7 @@ impl ExtendedModel {
                         .fk_loaded_warm(&p.kappa, loads, &guess, &mut warm)
                         .or_else(|_| self.robot.fk_loaded(&p.kappa, loads, &guess))
                         .ok()?;
+                    states.insert(u, warm);
                     Some([
                         e.pose.x - rigid[0],
                         e.pose.y - rigid[1],
