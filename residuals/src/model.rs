@@ -186,11 +186,7 @@ impl ExtendedModel {
             .zip(kappa.par_chunks(CHUNK))
             .map(|(c, kc)| {
                 let mut warm = pcr_kinematics::statics::LoadedWarm::default();
-                let mut guess = s.samples[..=c[0].min(s.samples.len() - 1)]
-                    .iter()
-                    .rev()
-                    .find_map(|x| x.pose)
-                    .map_or(Pose::default(), |p| Pose::new(p[0], p[1], p[2]));
+                let mut guess = start_guess(s, c[0]);
                 c.iter()
                     .zip(kc)
                     .map(|(&k, &kp)| {
@@ -272,12 +268,7 @@ impl ExtendedModel {
             return Vec::new();
         };
         let k0 = range.start;
-        let mut guess = s.samples[..=k0.min(s.samples.len().saturating_sub(1))]
-            .iter()
-            .rev()
-            .find_map(|x| x.pose)
-            .or_else(|| s.samples.iter().find_map(|x| x.pose))
-            .map_or(Pose::default(), |p| Pose::new(p[0], p[1], p[2]));
+        let mut guess = start_guess(s, k0);
         let mut out: Vec<Prediction> = Vec::with_capacity(range.len());
         // The rows whose loaded equilibrium is needed (a row at rest takes its predecessor's).
         let mut unique: Vec<usize> = Vec::new();
@@ -423,13 +414,7 @@ impl ExtendedModel {
         }
         let mut out: Vec<Prediction> = Vec::with_capacity(range.len());
         let mut warm = pcr_kinematics::statics::LoadedWarm::default();
-        // Started at the last measured pose at or before the range (the first of the series).
-        let mut guess = s.samples[..=range.start.min(s.samples.len().saturating_sub(1))]
-            .iter()
-            .rev()
-            .find_map(|x| x.pose)
-            .or_else(|| s.samples.iter().find_map(|x| x.pose))
-            .map_or(Pose::default(), |p| Pose::new(p[0], p[1], p[2]));
+        let mut guess = start_guess(s, range.start);
         for k in range {
             let smp = &s.samples[k];
             let kappa: [f64; 3] =
@@ -520,6 +505,17 @@ impl ExtendedModel {
         }
         q
     }
+}
+
+/// Where the kinematics of a series' rows from row `k` on start: the last measured pose at or
+/// before it (the first of the series where there is none before).
+fn start_guess(s: &Series, k: usize) -> Pose {
+    s.samples[..=k.min(s.samples.len().saturating_sub(1))]
+        .iter()
+        .rev()
+        .find_map(|x| x.pose)
+        .or_else(|| s.samples.iter().find_map(|x| x.pose))
+        .map_or(Pose::default(), |p| Pose::new(p[0], p[1], p[2]))
 }
 
 /// The commanded motor positions of every row shifted back by `delay` (interpolated; one pass).
