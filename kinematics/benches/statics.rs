@@ -1,6 +1,6 @@
 //! Timing of the kineto-static model along a series of 2000 consecutive curvature triples:
-//! `fk_loaded_warm` and `load_response_warm` (springs and an external force), plus a checksum
-//! of the results to compare builds. Run: `cargo bench -p pcr-kinematics --bench statics`.
+//! `fk_loaded_warm`, `load_response_warm` and `loaded_sensitivity_warm` (springs and an
+//! external force), plus a checksum of the results to compare builds. Run: `cargo bench -p pcr-kinematics --bench statics`.
 
 use pcr_kinematics::statics::{LoadedWarm, Loads};
 use pcr_kinematics::{Pose, Robot};
@@ -95,14 +95,26 @@ fn main() {
                 }
             }
             let lr = t1.elapsed();
+            let t2 = Instant::now();
+            let mut warm = LoadedWarm::default();
+            let mut ssum = 0.0f64;
+            for (kappa, p) in &s {
+                let x = r
+                    .loaded_sensitivity_warm(black_box(kappa), &loads, p, &mut warm)
+                    .unwrap();
+                ssum += x.d_kappa.iter().flatten().map(|v| v.abs()).sum::<f64>();
+            }
+            let sens = t2.elapsed();
             println!(
-                "{name} rep {rep}: fk_loaded_warm {:.3} ms/{} rows ({:.2} us/row), load_response_warm {:.3} ms ({:.2} us/row); sums {:.12} {:.12} {:.15} {:.12}",
+                "{name} rep {rep}: fk_loaded_warm {:.3} ms/{} rows ({:.2} us/row), load_response_warm {:.3} ms ({:.2} us/row), loaded_sensitivity_warm {:.3} ms ({:.2} us/row); sums {:.12} {:.12} {:.15} {:.12} {:.6}",
                 fk.as_secs_f64() * 1e3,
                 s.len(),
                 fk.as_secs_f64() * 1e6 / s.len() as f64,
                 lr.as_secs_f64() * 1e3,
                 lr.as_secs_f64() * 1e6 / s.len() as f64,
-                sum[0], sum[1], sum[2], rsum
+                sens.as_secs_f64() * 1e3,
+                sens.as_secs_f64() * 1e6 / s.len() as f64,
+                sum[0], sum[1], sum[2], rsum, ssum
             );
         }
     }
