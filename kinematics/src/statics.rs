@@ -147,52 +147,16 @@ impl Segment {
             arc,
         }
     }
-
-    /// The elastica under the tip force `f` (leg's local frame, N) with its base curvature
-    /// `u0` (1/mm) above the arc's: the tip's displacement from the arc's tip (local frame, mm)
-    /// and the change of the total bending theta(l_C) - theta(0) (rad).
-    /// (The solver integrates the three segments together, [`deflect3`], with the same
-    /// operations; this is the reference the tests hold that to.)
-    #[cfg_attr(not(test), allow(dead_code))]
-    fn deflect(&self, ei: f64, f: Vec2, u0: f64) -> [f64; 3] {
-        let (fx, fy) = (f[0] / ei, f[1] / ei);
-        // State: delta = theta - theta_arc, u = delta', and the displacement (which does not
-        // feed back). (cos, sin) of delta are carried from step to step and turned by each
-        // stage's increment of delta (short series: no transcendental call on the way).
-        // The right-hand side at arc node `a` with (cos, sin) delta = `e`.
-        let rhs = |a: [f64; 2], e: [f64; 2], u: f64| -> [f64; 4] {
-            let c = a[0] * e[0] - a[1] * e[1];
-            let s = a[1] * e[0] + a[0] * e[1];
-            [u, s * fx - c * fy, c - a[0], s - a[1]]
-        };
-        let turn = |e: [f64; 2], x: f64| -> [f64; 2] {
-            let (s, c) = sin_cos_small(x);
-            [e[0] * c - e[1] * s, e[1] * c + e[0] * s]
-        };
-        let h = self.h;
-        let (mut d, mut u, mut x, mut y) = (0.0, u0, 0.0, 0.0);
-        let mut e = [1.0, 0.0];
-        for j in 0..STEPS {
-            let (a0, am, a1) = (self.arc[2 * j], self.arc[2 * j + 1], self.arc[2 * j + 2]);
-            let k1 = rhs(a0, e, u);
-            let k2 = rhs(am, turn(e, 0.5 * h * k1[0]), u + 0.5 * h * k1[1]);
-            let k3 = rhs(am, turn(e, 0.5 * h * k2[0]), u + 0.5 * h * k2[1]);
-            let k4 = rhs(a1, turn(e, h * k3[0]), u + h * k3[1]);
-            let w = h / 6.0;
-            let dd = w * (k1[0] + 2.0 * (k2[0] + k3[0]) + k4[0]);
-            d += dd;
-            e = turn(e, dd);
-            u += w * (k1[1] + 2.0 * (k2[1] + k3[1]) + k4[1]);
-            x += w * (k1[2] + 2.0 * (k2[2] + k3[2]) + k4[2]);
-            y += w * (k1[3] + 2.0 * (k2[3] + k3[3]) + k4[3]);
-        }
-        [x, y, d]
-    }
 }
 
-/// [`Segment::deflect`] of the three segments at once, in lockstep (the three integrations are
-/// independent chains the processor overlaps; the same operations, bit-for-bit the same
-/// results).
+/// The elastica of the three segments under their tip forces `f` (leg's local frame, N) with
+/// their base curvatures `u0` (1/mm) above the arcs': each tip's displacement from its arc's
+/// tip (local frame, mm) and the change of its total bending theta(l_C) - theta(0) (rad). RK4
+/// on delta = theta - theta_arc and u = delta' (the displacement does not feed back); (cos,
+/// sin) of delta are carried from step to step and turned by each stage's increment (short
+/// series: no transcendental call on the way). The three integrations run in lockstep
+/// (independent chains the processor overlaps); the tests hold them bit for bit to one
+/// segment's integration.
 fn deflect3(seg: &[Segment; 3], ei: f64, f: [Vec2; 3], u0: [f64; 3]) -> [[f64; 3]; 3] {
     let fx: [f64; 3] = std::array::from_fn(|i| f[i][0] / ei);
     let fy: [f64; 3] = std::array::from_fn(|i| f[i][1] / ei);
@@ -244,8 +208,10 @@ fn deflect3(seg: &[Segment; 3], ei: f64, f: [Vec2; 3], u0: [f64; 3]) -> [[f64; 3
     std::array::from_fn(|i| [x[i], y[i], d[i]])
 }
 
-/// [`Segment::deflect_jac`] of the three segments at once, in lockstep (as [`deflect3`]; the
-/// same operations, bit-for-bit the same results).
+/// [`deflect3`] with its derivatives `jac[i][o][k] = d out_o / d (f_x, f_y, u0)_k` of segment
+/// i: the variational equations integrated alongside, stage by stage, so that they are the
+/// exact derivatives of the discrete integration (the outputs are bit for bit
+/// [`deflect3`]'s).
 #[allow(clippy::type_complexity)]
 fn deflect_jac3(
     seg: &[Segment; 3],
@@ -342,80 +308,6 @@ fn deflect_jac3(
     (out, jac)
 }
 
-impl Segment {
-    /// [`Segment::deflect`] with its derivatives `jac[o][k] = d out_o / d (f_x, f_y, u0)_k`: the
-    /// variational equations of the elastica integrated alongside, stage by stage, so that they
-    /// are the exact derivatives of the discrete integration (`out` is bit-for-bit
-    /// [`Segment::deflect`]'s).
-    #[cfg_attr(not(test), allow(dead_code))]
-    fn deflect_jac(&self, ei: f64, f: Vec2, u0: f64) -> ([f64; 3], [[f64; 3]; 3]) {
-        let (fx, fy) = (f[0] / ei, f[1] / ei);
-        let g = 1.0 / ei;
-        // The right-hand side at arc node `a` with (cos, sin) delta = `e`, and (cos, sin) of
-        // the tangent angle there.
-        let rhs = |a: [f64; 2], e: [f64; 2], u: f64| -> ([f64; 4], f64, f64) {
-            let c = a[0] * e[0] - a[1] * e[1];
-            let s = a[1] * e[0] + a[0] * e[1];
-            ([u, s * fx - c * fy, c - a[0], s - a[1]], c, s)
-        };
-        // The tangent's right-hand side for each input k: (d delta, d u) = t[k], the tangent
-        // angle (c, s) of the stage; the loads' own derivatives (1/EI along f_x, f_y).
-        let var = |t: &[[f64; 2]; 3], c: f64, s: f64| -> [[f64; 4]; 3] {
-            let m = c * fx + s * fy;
-            [
-                [t[0][1], m * t[0][0] + s * g, -s * t[0][0], c * t[0][0]],
-                [t[1][1], m * t[1][0] - c * g, -s * t[1][0], c * t[1][0]],
-                [t[2][1], m * t[2][0], -s * t[2][0], c * t[2][0]],
-            ]
-        };
-        let turn = |e: [f64; 2], x: f64| -> [f64; 2] {
-            let (s, c) = sin_cos_small(x);
-            [e[0] * c - e[1] * s, e[1] * c + e[0] * s]
-        };
-        let adv = |t: &[[f64; 2]; 3], k: &[[f64; 4]; 3], x: f64| -> [[f64; 2]; 3] {
-            std::array::from_fn(|i| [t[i][0] + x * k[i][0], t[i][1] + x * k[i][1]])
-        };
-        let h = self.h;
-        let (mut d, mut u, mut x, mut y) = (0.0, u0, 0.0, 0.0);
-        let mut e = [1.0, 0.0];
-        // Tangent state per input: d delta, d u, d x, d y.
-        let mut ts = [[0.0f64; 2]; 3];
-        ts[2][1] = 1.0;
-        let mut tp = [[0.0f64; 2]; 3];
-        for j in 0..STEPS {
-            let (a0, am, a1) = (self.arc[2 * j], self.arc[2 * j + 1], self.arc[2 * j + 2]);
-            let (k1, c1, s1) = rhs(a0, e, u);
-            let v1 = var(&ts, c1, s1);
-            let (k2, c2, s2) = rhs(am, turn(e, 0.5 * h * k1[0]), u + 0.5 * h * k1[1]);
-            let v2 = var(&adv(&ts, &v1, 0.5 * h), c2, s2);
-            let (k3, c3, s3) = rhs(am, turn(e, 0.5 * h * k2[0]), u + 0.5 * h * k2[1]);
-            let v3 = var(&adv(&ts, &v2, 0.5 * h), c3, s3);
-            let (k4, c4, s4) = rhs(a1, turn(e, h * k3[0]), u + h * k3[1]);
-            let v4 = var(&adv(&ts, &v3, h), c4, s4);
-            let w = h / 6.0;
-            let dd = w * (k1[0] + 2.0 * (k2[0] + k3[0]) + k4[0]);
-            d += dd;
-            e = turn(e, dd);
-            u += w * (k1[1] + 2.0 * (k2[1] + k3[1]) + k4[1]);
-            x += w * (k1[2] + 2.0 * (k2[2] + k3[2]) + k4[2]);
-            y += w * (k1[3] + 2.0 * (k2[3] + k3[3]) + k4[3]);
-            for i in 0..3 {
-                let inc = |c: usize| w * (v1[i][c] + 2.0 * (v2[i][c] + v3[i][c]) + v4[i][c]);
-                ts[i][0] += inc(0);
-                ts[i][1] += inc(1);
-                tp[i][0] += inc(2);
-                tp[i][1] += inc(3);
-            }
-        }
-        let jac = [
-            [tp[0][0], tp[1][0], tp[2][0]],
-            [tp[0][1], tp[1][1], tp[2][1]],
-            [ts[0][0], ts[1][0], ts[2][0]],
-        ];
-        ([x, y, d], jac)
-    }
-}
-
 /// (sin x, cos x): Taylor series, to x^6 for |x| <= 0.02, to x^10 for |x| <= 0.1, to x^14 for
 /// |x| <= 0.5 (each with an error below 1e-17), the library's beyond.
 #[inline]
@@ -497,7 +389,7 @@ struct LoadedSetup {
 }
 
 /// The segments at one point of the iteration: their inputs (tip force, local frame, N; base
-/// curvature above the arc's, 1/mm), outputs ([`Segment::deflect`]) and the outputs'
+/// curvature above the arc's, 1/mm), outputs ([`deflect3`]) and the outputs'
 /// derivatives `lin[i][o][k] = d out_o / d input_k`.
 #[derive(Clone, Copy)]
 struct Segments {
@@ -536,7 +428,7 @@ struct LegTerms {
 #[derive(Clone, Copy)]
 enum SegmentMode<'a> {
     Exact,
-    /// Integrated, with the derivatives ([`Segment::deflect_jac`]).
+    /// Integrated, with the derivatives ([`deflect_jac3`]).
     Variational,
     Linear(&'a Segments),
 }
@@ -1230,6 +1122,119 @@ impl Robot {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    // The reference integrations of one segment the solver's lockstep ones (deflect3,
+    // deflect_jac3) are held to, bit for bit: the same operations, one segment at a time.
+    impl Segment {
+        /// The elastica under the tip force `f` (leg's local frame, N) with its base curvature
+        /// `u0` (1/mm) above the arc's: the tip's displacement from the arc's tip (local frame, mm)
+        /// and the change of the total bending theta(l_C) - theta(0) (rad).
+        fn deflect(&self, ei: f64, f: Vec2, u0: f64) -> [f64; 3] {
+            let (fx, fy) = (f[0] / ei, f[1] / ei);
+            // State: delta = theta - theta_arc, u = delta', and the displacement (which does not
+            // feed back). (cos, sin) of delta are carried from step to step and turned by each
+            // stage's increment of delta (short series: no transcendental call on the way).
+            // The right-hand side at arc node `a` with (cos, sin) delta = `e`.
+            let rhs = |a: [f64; 2], e: [f64; 2], u: f64| -> [f64; 4] {
+                let c = a[0] * e[0] - a[1] * e[1];
+                let s = a[1] * e[0] + a[0] * e[1];
+                [u, s * fx - c * fy, c - a[0], s - a[1]]
+            };
+            let turn = |e: [f64; 2], x: f64| -> [f64; 2] {
+                let (s, c) = sin_cos_small(x);
+                [e[0] * c - e[1] * s, e[1] * c + e[0] * s]
+            };
+            let h = self.h;
+            let (mut d, mut u, mut x, mut y) = (0.0, u0, 0.0, 0.0);
+            let mut e = [1.0, 0.0];
+            for j in 0..STEPS {
+                let (a0, am, a1) = (self.arc[2 * j], self.arc[2 * j + 1], self.arc[2 * j + 2]);
+                let k1 = rhs(a0, e, u);
+                let k2 = rhs(am, turn(e, 0.5 * h * k1[0]), u + 0.5 * h * k1[1]);
+                let k3 = rhs(am, turn(e, 0.5 * h * k2[0]), u + 0.5 * h * k2[1]);
+                let k4 = rhs(a1, turn(e, h * k3[0]), u + h * k3[1]);
+                let w = h / 6.0;
+                let dd = w * (k1[0] + 2.0 * (k2[0] + k3[0]) + k4[0]);
+                d += dd;
+                e = turn(e, dd);
+                u += w * (k1[1] + 2.0 * (k2[1] + k3[1]) + k4[1]);
+                x += w * (k1[2] + 2.0 * (k2[2] + k3[2]) + k4[2]);
+                y += w * (k1[3] + 2.0 * (k2[3] + k3[3]) + k4[3]);
+            }
+            [x, y, d]
+        }
+
+        /// [`Segment::deflect`] with its derivatives `jac[o][k] = d out_o / d (f_x, f_y, u0)_k`: the
+        /// variational equations of the elastica integrated alongside, stage by stage, so that they
+        /// are the exact derivatives of the discrete integration (`out` is bit-for-bit
+        /// [`Segment::deflect`]'s).
+        fn deflect_jac(&self, ei: f64, f: Vec2, u0: f64) -> ([f64; 3], [[f64; 3]; 3]) {
+            let (fx, fy) = (f[0] / ei, f[1] / ei);
+            let g = 1.0 / ei;
+            // The right-hand side at arc node `a` with (cos, sin) delta = `e`, and (cos, sin) of
+            // the tangent angle there.
+            let rhs = |a: [f64; 2], e: [f64; 2], u: f64| -> ([f64; 4], f64, f64) {
+                let c = a[0] * e[0] - a[1] * e[1];
+                let s = a[1] * e[0] + a[0] * e[1];
+                ([u, s * fx - c * fy, c - a[0], s - a[1]], c, s)
+            };
+            // The tangent's right-hand side for each input k: (d delta, d u) = t[k], the tangent
+            // angle (c, s) of the stage; the loads' own derivatives (1/EI along f_x, f_y).
+            let var = |t: &[[f64; 2]; 3], c: f64, s: f64| -> [[f64; 4]; 3] {
+                let m = c * fx + s * fy;
+                [
+                    [t[0][1], m * t[0][0] + s * g, -s * t[0][0], c * t[0][0]],
+                    [t[1][1], m * t[1][0] - c * g, -s * t[1][0], c * t[1][0]],
+                    [t[2][1], m * t[2][0], -s * t[2][0], c * t[2][0]],
+                ]
+            };
+            let turn = |e: [f64; 2], x: f64| -> [f64; 2] {
+                let (s, c) = sin_cos_small(x);
+                [e[0] * c - e[1] * s, e[1] * c + e[0] * s]
+            };
+            let adv = |t: &[[f64; 2]; 3], k: &[[f64; 4]; 3], x: f64| -> [[f64; 2]; 3] {
+                std::array::from_fn(|i| [t[i][0] + x * k[i][0], t[i][1] + x * k[i][1]])
+            };
+            let h = self.h;
+            let (mut d, mut u, mut x, mut y) = (0.0, u0, 0.0, 0.0);
+            let mut e = [1.0, 0.0];
+            // Tangent state per input: d delta, d u, d x, d y.
+            let mut ts = [[0.0f64; 2]; 3];
+            ts[2][1] = 1.0;
+            let mut tp = [[0.0f64; 2]; 3];
+            for j in 0..STEPS {
+                let (a0, am, a1) = (self.arc[2 * j], self.arc[2 * j + 1], self.arc[2 * j + 2]);
+                let (k1, c1, s1) = rhs(a0, e, u);
+                let v1 = var(&ts, c1, s1);
+                let (k2, c2, s2) = rhs(am, turn(e, 0.5 * h * k1[0]), u + 0.5 * h * k1[1]);
+                let v2 = var(&adv(&ts, &v1, 0.5 * h), c2, s2);
+                let (k3, c3, s3) = rhs(am, turn(e, 0.5 * h * k2[0]), u + 0.5 * h * k2[1]);
+                let v3 = var(&adv(&ts, &v2, 0.5 * h), c3, s3);
+                let (k4, c4, s4) = rhs(a1, turn(e, h * k3[0]), u + h * k3[1]);
+                let v4 = var(&adv(&ts, &v3, h), c4, s4);
+                let w = h / 6.0;
+                let dd = w * (k1[0] + 2.0 * (k2[0] + k3[0]) + k4[0]);
+                d += dd;
+                e = turn(e, dd);
+                u += w * (k1[1] + 2.0 * (k2[1] + k3[1]) + k4[1]);
+                x += w * (k1[2] + 2.0 * (k2[2] + k3[2]) + k4[2]);
+                y += w * (k1[3] + 2.0 * (k2[3] + k3[3]) + k4[3]);
+                for i in 0..3 {
+                    let inc = |c: usize| w * (v1[i][c] + 2.0 * (v2[i][c] + v3[i][c]) + v4[i][c]);
+                    ts[i][0] += inc(0);
+                    ts[i][1] += inc(1);
+                    tp[i][0] += inc(2);
+                    tp[i][1] += inc(3);
+                }
+            }
+            let jac = [
+                [tp[0][0], tp[1][0], tp[2][0]],
+                [tp[0][1], tp[1][1], tp[2][1]],
+                [ts[0][0], ts[1][0], ts[2][0]],
+            ];
+            ([x, y, d], jac)
+        }
+    }
 
     fn unloaded() -> Loads {
         Loads {
