@@ -224,6 +224,19 @@ impl ExtendedModel {
         parts.concat()
     }
 
+    /// A row's prediction before its kinematics: its effective motor positions and tendon
+    /// displacements, and the curvatures the map gives; no pose.
+    fn unsolved(&self, q_eff: [f64; 3], dl_eff: [f64; 3]) -> Prediction {
+        Prediction {
+            pose: None,
+            q_eff,
+            dl_eff,
+            kappa: std::array::from_fn(|i| self.robot.legs[i].map.kappa(dl_eff[i])),
+            j_q: Matrix3::zeros(),
+            j_kappa: Matrix3::zeros(),
+        }
+    }
+
     /// d pose / d q_eff and d pose / d kappa of a row at `pose` (the rigid kinematics).
     fn jacobians(
         &self,
@@ -275,19 +288,11 @@ impl ExtendedModel {
         let mut source: Vec<Option<usize>> = Vec::with_capacity(range.len());
         for k in range.clone() {
             let smp = &s.samples[k];
-            let kappa: [f64; 3] =
-                std::array::from_fn(|i| self.robot.legs[i].map.kappa(dl_eff[k][i]));
+            let mut pred = self.unsolved(q_eff[k], dl_eff[k]);
+            let kappa = pred.kappa;
             if let Some(p) = smp.pose {
                 guess = Pose::new(p[0], p[1], p[2]);
             }
-            let mut pred = Prediction {
-                pose: None,
-                q_eff: q_eff[k],
-                dl_eff: dl_eff[k],
-                kappa,
-                j_q: Matrix3::zeros(),
-                j_kappa: Matrix3::zeros(),
-            };
             if !want(k) {
                 out.push(pred);
                 source.push(None);
@@ -421,21 +426,14 @@ impl ExtendedModel {
         let mut guess = start_guess(s, range.start);
         for k in range {
             let smp = &s.samples[k];
-            let kappa: [f64; 3] =
-                std::array::from_fn(|i| self.robot.legs[i].map.kappa(dl_eff[k][i]));
+            let mut pred = self.unsolved(q_eff[k], dl_eff[k]);
+            let kappa = pred.kappa;
             // Warm start at the measured pose where there is one (robust across jumps).
             if let Some(p) = smp.pose {
                 guess = Pose::new(p[0], p[1], p[2]);
             }
             if !want(k) {
-                out.push(Prediction {
-                    pose: None,
-                    q_eff: q_eff[k],
-                    dl_eff: dl_eff[k],
-                    kappa,
-                    j_q: Matrix3::zeros(),
-                    j_kappa: Matrix3::zeros(),
-                });
+                out.push(pred);
                 continue;
             }
             // A row whose configuration is the previous one's (at rest) has its prediction.
@@ -461,21 +459,12 @@ impl ExtendedModel {
                     .map(|e| e.pose),
                 None => self.robot.fk_warm(&kappa, &guess).ok(),
             };
-            let (j_q, j_kappa) = match &pose {
-                Some(p) => self.jacobians(p, &kappa, &dl_eff[k], mmps),
-                None => (Matrix3::zeros(), Matrix3::zeros()),
-            };
             if let Some(p) = pose {
+                (pred.j_q, pred.j_kappa) = self.jacobians(&p, &kappa, &dl_eff[k], mmps);
+                pred.pose = Some([p.x, p.y, p.phi]);
                 guess = p;
             }
-            out.push(Prediction {
-                pose: pose.map(|p| [p.x, p.y, p.phi]),
-                q_eff: q_eff[k],
-                dl_eff: dl_eff[k],
-                kappa,
-                j_q,
-                j_kappa,
-            });
+            out.push(pred);
         }
         out
     }
