@@ -454,6 +454,20 @@ pub struct LoadedSensitivity {
     pub d_loads: [[f64; 3]; 5],
 }
 
+/// Another robot for [`Robot::loaded_directions_warm`]: this one with one parameter of its
+/// drawing or tendon map changed by `step`.
+#[derive(Debug, Clone, Copy)]
+pub struct Direction<'r> {
+    /// The changed robot.
+    pub robot: &'r Robot,
+    /// Its curvatures at the row (the same tendon displacements through its map).
+    pub kappa: [f64; 3],
+    /// Its springs' rest angles ([`Robot::home_joint_angles`]).
+    pub rest: [(f64, f64); 3],
+    /// The change of the parameter.
+    pub step: f64,
+}
+
 /// The state [`Robot::fk_loaded_warm`] carries from one call to the next along a series: the
 /// last solution and the inverse Jacobian of the quasi-Newton iteration (kept current by
 /// Broyden updates), and the springs' rest angles. One `LoadedWarm` serves one robot.
@@ -1021,6 +1035,46 @@ impl Robot {
         })
     }
 
+    /// The loaded equilibrium along a series (solved as [`Robot::fk_loaded_warm`] does) and
+    /// its first-order changes toward other robots: for each [`Direction`] (a robot that
+    /// differs from this one by `step` in one parameter of its drawing or tendon map, with its
+    /// curvatures at the row and its springs' rest angles), the change of the platform pose
+    /// (x mm, y mm, phi rad) per unit of the parameter, by the implicit function theorem: the
+    /// other robot's residual at this equilibrium, through this one's factored Jacobian. What
+    /// a fit of calibration parameters around a loaded model needs of each row, without an
+    /// equilibrium solved per parameter.
+    pub fn loaded_directions_warm(
+        &self,
+        kappa: &[f64; 3],
+        loads: &Loads,
+        guess: &Pose,
+        warm: &mut LoadedWarm,
+        directions: &[Direction<'_>],
+        out: &mut [[f64; 3]],
+    ) -> Result<Pose, FkError> {
+        let rest = *warm.rest.get_or_insert_with(|| self.home_joint_angles());
+        let st = self.loaded_setup_at_rest(kappa, rest);
+        let z = match self.fk_loaded_warm_in(&st, kappa, loads, guess, warm) {
+            Ok(z) => z,
+            Err(_) => self.fk_loaded_in(&st, kappa, loads, guess)?,
+        };
+        let segs = self.segments_at(&st, loads, &z);
+        let f0 = self
+            .loaded_eval(&st, loads, &z, SegmentMode::Linear(&segs))
+            .res;
+        let lu = self.loaded_jacobian(&st, loads, &z, &segs, &f0).lu();
+        let exact = self.loaded_eval(&st, loads, &z, SegmentMode::Exact).res;
+        for (d, o) in directions.iter().zip(out.iter_mut()) {
+            let std = d.robot.loaded_setup_at_rest(&d.kappa, d.rest);
+            let ft = (d.robot.loaded_eval(&std, loads, &z, SegmentMode::Exact).res - exact) / d.step;
+            let dz = lu
+                .solve(&(-ft))
+                .ok_or(FkError::NoSolution { reached: 0.0 })?;
+            *o = [dz[0], dz[1], dz[2]];
+        }
+        Ok(Pose::new(z[0], z[1], z[2]))
+    }
+
     /// The load response at the solved equilibrium `z`: the exact Jacobian there, and the
     /// residual's derivatives with respect to the five parameters.
     fn load_response_at(
@@ -1463,6 +1517,112 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn loaded_directions_are_the_derivatives_toward_other_robots() {
+        // Strong springs and a load: a change of the drawing moves the loaded pose differently
+        // from the rigid one (the springs' rest angles move with it), and a change of the map
+        // moves the curvatures.
+        let cfg = pcr_robot::RobotConfig::nominal();
+        let r = Robot::new(&cfg).unwrap();
+        let target = Pose::from_mm_deg(15.0, -25.0, 8.0);
+        let kappa = r.ik(&target).unwrap().kappa;
+        let loads = Loads {
+            force: [0.6, -0.4],
+            k_m: 900.0,
+            k_p: 600.0,
+            ..unloaded()
+        };
+        let dl: [f64; 3] = std::array::from_fn(|i| {
+            let m = &r.legs[i].map;
+            // The tendon displacement that gives kappa (bisection on the monotonic map).
+            let (mut lo, mut hi) = (-60.0, 60.0);
+            for _ in 0..200 {
+                let mid = 0.5 * (lo + hi);
+                if (m.kappa(mid) - kappa[i]) * (m.kappa(hi) - m.kappa(lo)) > 0.0 {
+                    hi = mid;
+                } else {
+                    lo = mid;
+                }
+            }
+            0.5 * (lo + hi)
+        });
+        type Change = fn(&mut pcr_robot::RobotConfig, f64);
+        let changes: [(&str, Change); 5] = [
+            ("psi[1]", |c, h| c.legs[0].psi_deg += h),
+            ("l_c[1]", |c, h| c.legs[0].l_c_mm += h),
+            ("r_p[2]", |c, h| c.legs[1].r_p_mm += h),
+            ("theta_p[3]", |c, h| c.legs[2].theta_p_deg += h),
+            ("map gain[2]", |c, h| {
+                let k0 = 1.0 / (c.legs[1].actuation.tendon_offset_mm * c.legs[1].l_c_mm);
+                let m = &mut c.legs[1].tendon_map;
+                if m.coeffs.is_empty() {
+                    m.coeffs = vec![k0];
+                }
+                m.coeffs[0] *= 1.0 + h;
+            }),
+        ];
+        let robot_of = |f: Change, h: f64| {
+            let mut c = cfg.clone();
+            f(&mut c, h);
+            Robot::new(&c).unwrap()
+        };
+        let step = 1e-5;
+        let others: Vec<Robot> = changes.iter().map(|(_, f)| robot_of(*f, step)).collect();
+        let dirs: Vec<Direction> = others
+            .iter()
+            .map(|o| Direction {
+                robot: o,
+                kappa: std::array::from_fn(|i| o.legs[i].map.kappa(dl[i])),
+                rest: o.home_joint_angles(),
+                step,
+            })
+            .collect();
+        let mut out = vec![[0.0; 3]; dirs.len()];
+        let mut warm = LoadedWarm::default();
+        let pose = r
+            .loaded_directions_warm(&kappa, &loads, &target, &mut warm, &dirs, &mut out)
+            .unwrap();
+        let p0 = r.fk_loaded(&kappa, &loads, &target).unwrap().pose;
+        assert!((pose.x - p0.x).abs() < 1e-7 && (pose.phi - p0.phi).abs() < 1e-9);
+        let mut differs_from_rigid = false;
+        for (k, (name, f)) in changes.iter().enumerate() {
+            // Central differences of the cold solves of the changed robots.
+            let h = 1e-4;
+            let solve = |h: f64| {
+                let o = robot_of(*f, h);
+                let kp: [f64; 3] = std::array::from_fn(|i| o.legs[i].map.kappa(dl[i]));
+                o.fk_loaded(&kp, &loads, &target).unwrap().pose
+            };
+            let (pp, pm) = (solve(h), solve(-h));
+            let fd = [
+                (pp.x - pm.x) / (2.0 * h),
+                (pp.y - pm.y) / (2.0 * h),
+                (pp.phi - pm.phi) / (2.0 * h),
+            ];
+            let scale = fd.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+            for c in 0..3 {
+                assert!(
+                    (fd[c] - out[k][c]).abs() < 2e-3 * scale + 1e-7,
+                    "{name} comp {c}: {} vs {} (central differences)",
+                    out[k][c],
+                    fd[c]
+                );
+            }
+            // The rigid model's change for the same parameter, at the same curvatures.
+            let o = robot_of(*f, h);
+            let kp: [f64; 3] = std::array::from_fn(|i| o.legs[i].map.kappa(dl[i]));
+            let rp = o.fk_warm(&kp, &p0).unwrap();
+            let rm = robot_of(*f, -h);
+            let km: [f64; 3] = std::array::from_fn(|i| rm.legs[i].map.kappa(dl[i]));
+            let rmp = rm.fk_warm(&km, &p0).unwrap();
+            let rd = [(rp.x - rmp.x) / (2.0 * h), (rp.y - rmp.y) / (2.0 * h)];
+            if (rd[0] - fd[0]).abs().max((rd[1] - fd[1]).abs()) > 0.1 * scale {
+                differs_from_rigid = true;
+            }
+        }
+        assert!(differs_from_rigid, "springs this strong change the columns");
     }
 
     #[test]

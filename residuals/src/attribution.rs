@@ -849,10 +849,6 @@ fn from_drawing<'a>(
         else {
             break;
         };
-        let Ok(model) = ExtendedModel::like(&cal, &best.1.model) else {
-            break;
-        };
-        let train = Context::training(set.series, model, set.blocks, set.w_phi);
         let refined = crate::refine::refine(
             &cal,
             &best.1.model,
@@ -860,13 +856,14 @@ fn from_drawing<'a>(
             set.blocks,
             set.w_phi,
             3000,
-            Some(&train),
+            true,
         );
         let Ok(model) = ExtendedModel::like(&refined, &best.1.model) else {
             break;
         };
         let full = Context::new(set.series, model, set.blocks, set.w_phi);
         let ms = held_out(&full);
+        tracing::debug!(held_out_ms = ms, best_ms, "calibration from the drawing");
         if full.rows.len() + 5 < best.1.rows.len() || ms >= 0.999 * best_ms {
             break;
         }

@@ -81,8 +81,6 @@ pub(crate) fn without<'a>(
     let effect = effects::named(name)?;
     let mut cfg = config.clone();
     effect.remove(&mut cfg.effects, params);
-    let model = ExtendedModel::like(&cfg, &ctx.model).ok()?;
-    let train_ctx = Context::training(set.series, model, set.blocks, set.w_phi);
     let refined = crate::refine::refine(
         &cfg,
         &ctx.model,
@@ -90,7 +88,7 @@ pub(crate) fn without<'a>(
         set.blocks,
         set.w_phi,
         3000,
-        Some(&train_ctx),
+        true,
     );
     let model = ExtendedModel::like(&refined, &ctx.model).ok()?;
     let mut rctx = Context::new(set.series, model, set.blocks, set.w_phi);

@@ -7,6 +7,10 @@ use crate::nuisance::{Nuisance, NuisanceTable};
 use crate::series::{Blocks, Series};
 use rayon::prelude::*;
 
+/// Rows of one series solved in sequence, warm-started from the row before (a chunk each for
+/// the threads).
+const CHUNK: usize = 256;
+
 /// One measured row with its residual.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RowRef {
@@ -77,6 +81,7 @@ impl<'a> Context<'a> {
         held_out_too: bool,
     ) -> Self {
         let wanted = |si: usize, k: usize| held_out_too || !blocks.held_out[blocks.block[si][k]];
+        let started = std::time::Instant::now();
         let preds: Vec<Vec<Prediction>> = series
             .iter()
             .enumerate()
@@ -106,6 +111,13 @@ impl<'a> Context<'a> {
                 });
             }
         }
+        tracing::debug!(
+            rows = rows.len(),
+            held_out_too,
+            loaded = model.loads.is_some(),
+            seconds = started.elapsed().as_secs_f64(),
+            "context predicted"
+        );
         Context {
             series,
             model,
@@ -118,11 +130,69 @@ impl<'a> Context<'a> {
         }
     }
 
+    /// The nuisance columns of every row under the loads of a loaded model
+    /// ([`crate::nuisance::LoadedChanges`]), solved in chunks of consecutive rows of one series
+    /// warm-started along the chunk, the chunks in parallel; `None` for a model without loads.
+    fn loaded_nuisance(&self, nui: &Nuisance) -> Option<Vec<Vec<[f64; 3]>>> {
+        let loads = self.model.loads.filter(|l| !l.is_unloaded())?;
+        let started = std::time::Instant::now();
+        let changes = nui.loaded_changes(&self.model.config)?;
+        let idx: Vec<usize> = (0..self.rows.len()).collect();
+        let chunks = self.chunks(&idx);
+        let parts: Vec<Vec<Vec<[f64; 3]>>> = chunks
+            .par_iter()
+            .map(|c| {
+                let mut warm = pcr_kinematics::statics::LoadedWarm::default();
+                c.iter()
+                    .map(|&i| {
+                        let mut col = vec![[0.0; 3]; nui.n];
+                        nui.loaded_columns(
+                            &changes,
+                            &self.model.robot,
+                            &loads,
+                            self.pred(&self.rows[i]),
+                            self.w_phi,
+                            &mut warm,
+                            &mut col,
+                        );
+                        col
+                    })
+                    .collect()
+            })
+            .collect();
+        tracing::debug!(
+            rows = self.rows.len(),
+            seconds = started.elapsed().as_secs_f64(),
+            "loaded nuisance columns"
+        );
+        Some(parts.into_iter().flatten().collect())
+    }
+
+    /// `idx` (row indices, ascending) cut into chunks of at most [`CHUNK`] consecutive rows of
+    /// one series.
+    fn chunks<'i>(&self, idx: &'i [usize]) -> Vec<&'i [usize]> {
+        let mut chunks: Vec<&[usize]> = Vec::new();
+        let mut start = 0;
+        for k in 1..=idx.len() {
+            if k == idx.len()
+                || k - start == CHUNK
+                || self.rows[idx[k]].s != self.rows[idx[start]].s
+            {
+                chunks.push(&idx[start..k]);
+                start = k;
+            }
+        }
+        chunks
+    }
+
     /// The nuisance columns of every row (computed once per context).
     pub fn nuisance(&self) -> std::sync::Arc<NuisanceTable> {
         self.nuisance
             .get_or_init(|| {
                 let nui = Nuisance::of(&self.model.config);
+                if let Some(cols) = self.loaded_nuisance(&nui) {
+                    return std::sync::Arc::new(NuisanceTable::new(nui, cols));
+                }
                 let cols = (0..self.rows.len())
                     .into_par_iter()
                     .map(|i| {
@@ -207,18 +277,7 @@ impl<'a> Context<'a> {
         idx: &[usize],
         loads: &pcr_kinematics::statics::Loads,
     ) -> Vec<[[f64; 3]; 5]> {
-        const CHUNK: usize = 256;
-        let mut chunks: Vec<&[usize]> = Vec::new();
-        let mut start = 0;
-        for k in 1..=idx.len() {
-            if k == idx.len()
-                || k - start == CHUNK
-                || self.rows[idx[k]].s != self.rows[idx[start]].s
-            {
-                chunks.push(&idx[start..k]);
-                start = k;
-            }
-        }
+        let chunks = self.chunks(idx);
         let parts: Vec<Vec<[[f64; 3]; 5]>> = chunks
             .par_iter()
             .map(|c| {

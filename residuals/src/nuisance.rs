@@ -163,6 +163,99 @@ impl Nuisance {
     }
 }
 
+/// The calibration parameters' changes of a loaded model: the robot changed by a small step in
+/// each parameter (through [`Nuisance::apply`], as a fit applies it), with its springs' rest
+/// angles. Under loads the rigid columns of [`Nuisance::columns`] are wrong: springs stiffen
+/// the mechanism against a change of the drawing (a segment length moves a loaded platform by
+/// half what it moves the rigid one, at springs three times the sweep's test strength), and
+/// their rest angles move with the drawing and the map. The columns are then the derivatives
+/// of the loaded equilibrium toward those robots
+/// ([`pcr_kinematics::Robot::loaded_directions_warm`]).
+#[derive(Debug)]
+pub struct LoadedChanges {
+    robots: Vec<Robot>,
+    rest: Vec<[(f64, f64); 3]>,
+    steps: Vec<f64>,
+}
+
+/// Relative finite-difference step of the loaded columns: a thousandth of a parameter's prior
+/// standard deviation (1e-3 mm or deg of the drawing, 5e-5 of a map coefficient).
+const LOADED_STEP: f64 = 1e-3;
+
+impl Nuisance {
+    /// The changed robots of the loaded columns around `config` (whose nuisance set this is);
+    /// `None` when one of them is not a valid robot.
+    pub fn loaded_changes(&self, config: &RobotConfig) -> Option<LoadedChanges> {
+        let prior = self.prior();
+        let mut robots = Vec::with_capacity(self.n);
+        let mut rest = Vec::with_capacity(self.n);
+        let mut steps = Vec::with_capacity(self.n);
+        for (j, p) in prior.iter().enumerate() {
+            let h = LOADED_STEP / p.sqrt();
+            let mut dx = vec![0.0; self.n];
+            dx[j] = h;
+            let mut c = config.clone();
+            self.apply(&dx, &mut c);
+            let r = Robot::new(&c).ok()?;
+            rest.push(r.home_joint_angles());
+            robots.push(r);
+            steps.push(h);
+        }
+        Some(LoadedChanges {
+            robots,
+            rest,
+            steps,
+        })
+    }
+
+    /// The columns of a row predicted as `p` by the loaded model `robot` under `loads`
+    /// ([`LoadedChanges`]), warm-started along a series by `warm`; `false` (columns zero) when
+    /// the equilibrium is not found.
+    pub fn loaded_columns(
+        &self,
+        changes: &LoadedChanges,
+        robot: &Robot,
+        loads: &pcr_kinematics::statics::Loads,
+        p: &Prediction,
+        w_phi: f64,
+        warm: &mut pcr_kinematics::statics::LoadedWarm,
+        out: &mut [[f64; 3]],
+    ) -> bool {
+        for c in out.iter_mut().take(self.n) {
+            *c = [0.0; 3];
+        }
+        let Some(pose) = p.pose else {
+            return false;
+        };
+        let dirs: Vec<pcr_kinematics::statics::Direction> = changes
+            .robots
+            .iter()
+            .zip(&changes.rest)
+            .zip(&changes.steps)
+            .map(|((r, rest), step)| pcr_kinematics::statics::Direction {
+                robot: r,
+                kappa: std::array::from_fn(|i| r.legs[i].map.kappa(p.dl_eff[i])),
+                rest: *rest,
+                step: *step,
+            })
+            .collect();
+        let guess = pcr_kinematics::Pose::new(pose[0], pose[1], pose[2]);
+        let ok = robot
+            .loaded_directions_warm(&p.kappa, loads, &guess, warm, &dirs, &mut out[..self.n])
+            .is_ok();
+        if ok {
+            for c in out.iter_mut().take(self.n) {
+                c[2] *= w_phi;
+            }
+        } else {
+            for c in out.iter_mut().take(self.n) {
+                *c = [0.0; 3];
+            }
+        }
+        ok
+    }
+}
+
 /// The nuisance parameters and their columns for every row of a context.
 #[derive(Debug)]
 pub struct NuisanceTable {

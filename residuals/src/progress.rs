@@ -25,6 +25,7 @@ impl ProgressSink {
 
     /// Reports the start of a stage.
     pub fn stage(&self, round: usize, what: &str, rows: usize, steps: usize) {
+        tracing::debug!(round, rows, steps, "stage: {what}");
         if let Some(p) = &self.0 {
             p.stage(round, what, rows, steps);
         }

@@ -10,7 +10,7 @@
 //! them where they suited it alone, and a later effect could otherwise only be fitted around
 //! that.
 
-use crate::context::{wrap, Context};
+use crate::context::wrap;
 use crate::effects::{self, Parameter};
 use crate::model::{ExtendedModel, Sensitivity};
 use crate::nuisance::Nuisance;
@@ -52,38 +52,91 @@ struct Linearised {
 }
 
 impl Linearised {
-    /// `share`: the refined rows' share of the training rows (the prior is the candidates'
-    /// prior on every training row, so it weighs the same against the data on a subsample).
-    fn new(ctx: &Context, rows: &[Vec<usize>], share: f64) -> Linearised {
-        let nui = Nuisance::of(&ctx.model.config);
-        let index: std::collections::HashMap<(usize, usize), usize> = ctx
-            .rows
+    /// The columns at `config` on the refined rows `rows` (per series), predicted here for
+    /// those rows alone (a few thousand, not the whole recording). `share`: the refined rows'
+    /// share of the training rows (the prior is the candidates' prior on every training row, so
+    /// it weighs the same against the data on a subsample).
+    fn new(
+        config: &RobotConfig,
+        like: &ExtendedModel,
+        series: &[Series],
+        rows: &[Vec<usize>],
+        w_phi: f64,
+        share: f64,
+    ) -> Result<Linearised, String> {
+        let mut model = ExtendedModel::like(config, like).map_err(|e| e.0)?;
+        model.interpolate = false;
+        let nui = Nuisance::of(&model.config);
+        let preds: Vec<Vec<crate::model::Prediction>> = series
             .iter()
-            .enumerate()
-            .map(|(i, r)| ((r.s, r.k), i))
+            .zip(rows)
+            .map(|(s, ks)| {
+                let want: std::collections::HashSet<usize> = ks.iter().copied().collect();
+                model.predict_where(s, &|k| want.contains(&k))
+            })
             .collect();
-        let at: Vec<Option<usize>> = rows
+        let at: Vec<(usize, usize)> = rows
             .iter()
             .enumerate()
             .flat_map(|(s, ks)| ks.iter().map(move |&k| (s, k)))
-            .map(|sk| index.get(&sk).copied())
             .collect();
-        let cols = at
-            .par_iter()
-            .map(|i| {
-                i.map(|i| {
-                    let mut c = vec![[0.0; 3]; nui.n];
-                    nui.columns(&ctx.model.robot, ctx.pred(&ctx.rows[i]), ctx.w_phi, &mut c);
-                    c
+        // Under loads, the loaded columns ([`crate::nuisance::LoadedChanges`]), warm-started
+        // along each series' rows.
+        let loaded = model
+            .loads
+            .filter(|l| !l.is_unloaded())
+            .and_then(|l| Some((l, nui.loaded_changes(&model.config)?)));
+        let cols = match &loaded {
+            Some((loads, changes)) => {
+                let mut per: Vec<Vec<(usize, usize)>> = Vec::new();
+                for &(s, k) in &at {
+                    match per.last_mut() {
+                        Some(c) if c[0].0 == s && c.len() < 256 => c.push((s, k)),
+                        _ => per.push(vec![(s, k)]),
+                    }
+                }
+                per.par_iter()
+                    .flat_map_iter(|chunk| {
+                        let mut warm = pcr_kinematics::statics::LoadedWarm::default();
+                        chunk
+                            .iter()
+                            .map(|&(s, k)| {
+                                let p = &preds[s][k];
+                                p.pose?;
+                                let mut c = vec![[0.0; 3]; nui.n];
+                                nui.loaded_columns(
+                                    changes,
+                                    &model.robot,
+                                    loads,
+                                    p,
+                                    w_phi,
+                                    &mut warm,
+                                    &mut c,
+                                )
+                                .then_some(c)
+                            })
+                            .collect::<Vec<_>>()
+                    })
+                    .collect()
+            }
+            None => at
+                .par_iter()
+                .map(|&(s, k)| {
+                    let p = &preds[s][k];
+                    p.pose.map(|_| {
+                        let mut c = vec![[0.0; 3]; nui.n];
+                        nui.columns(&model.robot, p, w_phi, &mut c);
+                        c
+                    })
                 })
-            })
-            .collect();
+                .collect(),
+        };
         let prior_sqrt = nui.prior().iter().map(|p| (p * share).sqrt()).collect();
-        Linearised {
+        Ok(Linearised {
             nui,
             cols,
             prior_sqrt,
-        }
+        })
     }
 
     fn n(&self) -> usize {
@@ -304,8 +357,7 @@ impl Problem for Refit<'_> {
 /// Refines the continuous parameters of every effect of `config` on (at most `max_rows` of)
 /// the training rows; returns the refined configuration (or the input when there is nothing to
 /// refine or the solver fails). The models are solved as `like` is (exact or fast). With
-/// `nuisance` (the residuals of `config`), the calibration parameters are refined with them,
-/// linearised at `config`.
+/// `calibration`, the calibration parameters are refined with them, linearised at `config`.
 pub fn refine(
     config: &RobotConfig,
     like: &ExtendedModel,
@@ -313,7 +365,7 @@ pub fn refine(
     blocks: &Blocks,
     w_phi: f64,
     max_rows: usize,
-    nuisance: Option<&Context>,
+    calibration: bool,
 ) -> RobotConfig {
     let slots = slots(&config.effects);
     if slots.is_empty() {
@@ -359,7 +411,15 @@ pub fn refine(
         .zip(lo.iter().zip(&hi))
         .map(|(v, (l, h))| v.clamp(*l, *h))
         .collect();
-    let nuisance = nuisance.map(|ctx| Linearised::new(ctx, &rows, n as f64 / total.max(1) as f64));
+    let nuisance = if calibration {
+        let share = n as f64 / total.max(1) as f64;
+        match Linearised::new(config, like, series, &rows, w_phi, share) {
+            Ok(l) => Some(l),
+            Err(_) => return config.clone(),
+        }
+    } else {
+        None
+    };
     if let Some(l) = &nuisance {
         x0.resize(x0.len() + l.n(), 0.0);
         lo.resize(x0.len(), f64::NEG_INFINITY);
@@ -379,7 +439,17 @@ pub fn refine(
         max_evaluations: 200,
         ..Options::default()
     };
-    match lsq::solve(&mut p, &x0, &lo, &hi, &opts) {
+    let started = std::time::Instant::now();
+    let fit = lsq::solve(&mut p, &x0, &lo, &hi, &opts);
+    tracing::debug!(
+        rows = n,
+        parameters = x0.len(),
+        evaluations = fit.as_ref().map_or(0, |f| f.evaluations),
+        jacobians = fit.as_ref().map_or(0, |f| f.jacobians),
+        seconds = started.elapsed().as_secs_f64(),
+        "joint refinement"
+    );
+    match fit {
         Ok(fit) => p.config(&fit.x),
         Err(_) => config.clone(),
     }
