@@ -130,42 +130,139 @@ impl<'a> Context<'a> {
         }
     }
 
+    /// The rows' configuration (each segment's bending, rad) and where a new series breaks
+    /// the path: what [`crate::interpolation::interpolate`] interpolates along.
+    fn configuration_path(&self) -> (Vec<[f64; 3]>, Vec<bool>) {
+        let lc: [f64; 3] = std::array::from_fn(|i| self.model.robot.legs[i].l_c);
+        let cfg: Vec<[f64; 3]> = self
+            .rows
+            .iter()
+            .map(|r| {
+                let k = self.pred(r).kappa;
+                std::array::from_fn(|l| k[l] * lc[l])
+            })
+            .collect();
+        let breaks: Vec<bool> = (0..self.rows.len())
+            .map(|i| i > 0 && self.rows[i].s != self.rows[i - 1].s)
+            .collect();
+        (cfg, breaks)
+    }
+
     /// The nuisance columns of every row under the loads of a loaded model
-    /// ([`crate::nuisance::LoadedChanges`]), solved in chunks of consecutive rows of one series
-    /// warm-started along the chunk, the chunks in parallel; `None` for a model without loads.
+    /// ([`crate::nuisance::LoadedChanges`]); `None` for a model without loads. An exact model
+    /// solves them at every row; otherwise the rigid columns are computed at every row and the
+    /// loads' change of them is interpolated along the configuration
+    /// ([`crate::interpolation::interpolate`]), each stretch checked to
+    /// [`MAX_RESPONSE_ERROR`] of the largest loaded column of its parameter.
     fn loaded_nuisance(&self, nui: &Nuisance) -> Option<Vec<Vec<[f64; 3]>>> {
         let loads = self.model.loads.filter(|l| !l.is_unloaded())?;
         let started = std::time::Instant::now();
         let changes = nui.loaded_changes(&self.model.config)?;
-        let idx: Vec<usize> = (0..self.rows.len()).collect();
-        let chunks = self.chunks(&idx);
-        let parts: Vec<Vec<Vec<[f64; 3]>>> = chunks
-            .par_iter()
-            .map(|c| {
-                let mut warm = pcr_kinematics::statics::LoadedWarm::default();
-                c.iter()
-                    .map(|&i| {
-                        let mut col = vec![[0.0; 3]; nui.n];
-                        nui.loaded_columns(
-                            &changes,
-                            &self.model.robot,
-                            &loads,
-                            self.pred(&self.rows[i]),
-                            self.w_phi,
-                            &mut warm,
-                            &mut col,
-                        );
-                        col
-                    })
-                    .collect()
+        let n = nui.n;
+        let solve_rows = |idx: &[usize]| -> Vec<Option<Vec<[f64; 3]>>> {
+            let parts: Vec<Vec<Option<Vec<[f64; 3]>>>> = self
+                .chunks(idx)
+                .par_iter()
+                .map(|c| {
+                    let mut warm = pcr_kinematics::statics::LoadedWarm::default();
+                    c.iter()
+                        .map(|&i| {
+                            let mut col = vec![[0.0; 3]; n];
+                            nui.loaded_columns(
+                                &changes,
+                                &self.model.robot,
+                                &loads,
+                                self.pred(&self.rows[i]),
+                                self.w_phi,
+                                &mut warm,
+                                &mut col,
+                            )
+                            .then_some(col)
+                        })
+                        .collect()
+                })
+                .collect();
+            parts.into_iter().flatten().collect()
+        };
+        if self.model.exact {
+            let all: Vec<usize> = (0..self.rows.len()).collect();
+            let cols = solve_rows(&all)
+                .into_iter()
+                .map(|c| c.unwrap_or_else(|| vec![[0.0; 3]; n]))
+                .collect();
+            return Some(cols);
+        }
+        let rigid: Vec<Vec<[f64; 3]>> = (0..self.rows.len())
+            .into_par_iter()
+            .map(|i| {
+                let mut c = vec![[0.0; 3]; n];
+                nui.columns(
+                    &self.model.robot,
+                    self.pred(&self.rows[i]),
+                    self.w_phi,
+                    &mut c,
+                );
+                c
+            })
+            .collect();
+        let (cfg, breaks) = self.configuration_path();
+        // The largest loaded column of each parameter over the rows solved so far.
+        let scale = std::cell::RefCell::new(vec![0.0f64; n]);
+        let mut solve = |idx: &[usize]| -> Vec<Option<Vec<f64>>> {
+            let solved = solve_rows(idx);
+            let mut sc = scale.borrow_mut();
+            idx.iter()
+                .zip(solved)
+                .map(|(&i, c)| {
+                    let c = c?;
+                    for (s, col) in sc.iter_mut().zip(&c) {
+                        *s = s.max(col.iter().map(|v| v * v).sum::<f64>().sqrt());
+                    }
+                    // The loads' change of the rigid columns.
+                    Some(
+                        c.iter()
+                            .zip(&rigid[i])
+                            .flat_map(|(l, r)| (0..3).map(move |k| l[k] - r[k]))
+                            .collect(),
+                    )
+                })
+                .collect()
+        };
+        let within = |a: &Vec<f64>, b: &Vec<f64>| {
+            let sc = scale.borrow();
+            (0..n).all(|j| {
+                let e = (0..3)
+                    .map(|c| (a[3 * j + c] - b[3 * j + c]).powi(2))
+                    .sum::<f64>();
+                e.sqrt() <= MAX_RESPONSE_ERROR * sc[j]
+            })
+        };
+        let (vals, st) =
+            crate::interpolation::interpolate::<Vec<f64>>(&cfg, &breaks, &mut solve, &within);
+        let cols = vals
+            .into_iter()
+            .zip(rigid)
+            .map(|(v, mut r)| {
+                if let Some(v) = v {
+                    for (j, c) in r.iter_mut().enumerate() {
+                        for k in 0..3 {
+                            c[k] += v[3 * j + k];
+                        }
+                    }
+                }
+                r
             })
             .collect();
         tracing::debug!(
-            rows = self.rows.len(),
-            seconds = started.elapsed().as_secs_f64(),
-            "loaded nuisance columns"
+            "loaded nuisance columns: {} of {} rows solved ({} anchors, {} checks, {} bisected) in {:.3} s",
+            st.solved,
+            st.rows,
+            st.anchors,
+            st.checked,
+            st.bisected,
+            started.elapsed().as_secs_f64()
         );
-        Some(parts.into_iter().flatten().collect())
+        Some(cols)
     }
 
     /// `idx` (row indices, ascending) cut into chunks of at most [`CHUNK`] consecutive rows of
@@ -307,18 +404,7 @@ impl<'a> Context<'a> {
         &self,
         loads: &pcr_kinematics::statics::Loads,
     ) -> (Vec<[[f64; 3]; 5]>, Interpolation) {
-        let lc: [f64; 3] = std::array::from_fn(|i| self.model.robot.legs[i].l_c);
-        let cfg: Vec<[f64; 3]> = self
-            .rows
-            .iter()
-            .map(|r| {
-                let k = self.pred(r).kappa;
-                std::array::from_fn(|l| k[l] * lc[l])
-            })
-            .collect();
-        let breaks: Vec<bool> = (0..self.rows.len())
-            .map(|i| i > 0 && self.rows[i].s != self.rows[i - 1].s)
-            .collect();
+        let (cfg, breaks) = self.configuration_path();
         // The largest response of each parameter over the rows solved so far.
         let scale = std::cell::Cell::new([0.0f64; 5]);
         let flat = |r: &[[f64; 3]; 5]| -> [f64; 15] { std::array::from_fn(|j| r[j / 3][j % 3]) };
@@ -355,7 +441,7 @@ impl<'a> Context<'a> {
             })
         };
         let (vals, st) =
-            crate::interpolation::interpolate::<15>(&cfg, &breaks, &mut solve, &within);
+            crate::interpolation::interpolate::<[f64; 15]>(&cfg, &breaks, &mut solve, &within);
         let out = vals
             .into_iter()
             .map(|v| {

@@ -19,7 +19,25 @@ pub const ANCHOR_DEVIATION_RAD: f64 = 0.01;
 pub const ANCHOR_BENDING_RAD: f64 = 0.2;
 
 /// Solves the points it is given (ascending) and returns their values (`None`: no value).
-pub type Solver<'a, const M: usize> = dyn FnMut(&[usize]) -> Vec<Option<[f64; M]>> + 'a;
+pub type Solver<'a, V> = dyn FnMut(&[usize]) -> Vec<Option<V>> + 'a;
+
+/// A value that can be interpolated: a fixed number of reals, or as many as a caller needs.
+pub trait Lerp: Clone {
+    /// `a + t (b - a)`, component by component.
+    fn lerp(a: &Self, b: &Self, t: f64) -> Self;
+}
+
+impl<const M: usize> Lerp for [f64; M] {
+    fn lerp(a: &Self, b: &Self, t: f64) -> Self {
+        std::array::from_fn(|j| a[j] + t * (b[j] - a[j]))
+    }
+}
+
+impl Lerp for Vec<f64> {
+    fn lerp(a: &Self, b: &Self, t: f64) -> Self {
+        a.iter().zip(b).map(|(x, y)| x + t * (y - x)).collect()
+    }
+}
 
 /// How a set of values was interpolated.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
@@ -108,14 +126,14 @@ pub fn anchors(cfg: &[[f64; 3]], breaks: &[bool]) -> Vec<bool> {
 /// there; a stretch with an end without a value is solved point by point). `within(interpolated,
 /// solved)` says whether an interpolation is close enough; where it is not, the stretch is
 /// bisected.
-pub fn interpolate<const M: usize>(
+pub fn interpolate<V: Lerp>(
     cfg: &[[f64; 3]],
     breaks: &[bool],
-    solve: &mut Solver<'_, M>,
-    within: &dyn Fn(&[f64; M], &[f64; M]) -> bool,
-) -> (Vec<Option<[f64; M]>>, Interpolation) {
+    solve: &mut Solver<'_, V>,
+    within: &dyn Fn(&V, &V) -> bool,
+) -> (Vec<Option<V>>, Interpolation) {
     let n = cfg.len();
-    let mut out: Vec<Option<[f64; M]>> = vec![None; n];
+    let mut out: Vec<Option<V>> = vec![None; n];
     let mut done = vec![false; n];
     let anchor = anchors(cfg, breaks);
     let idx: Vec<usize> = (0..n).filter(|&i| anchor[i]).collect();
@@ -129,9 +147,6 @@ pub fn interpolate<const M: usize>(
         done[i] = true;
     }
     stats.solved += idx.len();
-    let lerp = |a: &[f64; M], b: &[f64; M], t: f64| -> [f64; M] {
-        std::array::from_fn(|j| a[j] + t * (b[j] - a[j]))
-    };
     // Stretches (a, b) between consecutive anchors of one unbroken path with rows between.
     let mut pending: Vec<(usize, usize)> = idx
         .windows(2)
@@ -149,16 +164,17 @@ pub fn interpolate<const M: usize>(
         for (&(a, b), (&m, v)) in pending.iter().zip(mids.iter().zip(solved)) {
             out[m] = v;
             done[m] = true;
-            let (Some(va), Some(vb), Some(vm)) = (out[a], out[b], out[m]) else {
+            let (Some(va), Some(vb), Some(vm)) = (&out[a], &out[b], &out[m]) else {
                 whole.push((a, b));
                 continue;
             };
+            let (va, vb) = (va.clone(), vb.clone());
             let (t, _) = chord(&cfg[a], &cfg[b], &cfg[m]);
-            if within(&lerp(&va, &vb, t), &vm) {
+            if within(&V::lerp(&va, &vb, t), vm) {
                 for k in a + 1..b {
                     if !done[k] {
                         let (t, _) = chord(&cfg[a], &cfg[b], &cfg[k]);
-                        out[k] = Some(lerp(&va, &vb, t));
+                        out[k] = Some(V::lerp(&va, &vb, t));
                     }
                 }
             } else {
@@ -216,7 +232,7 @@ mod tests {
         let (cfg, breaks) = path();
         let mut calls = 0;
         let tol = 1e-4;
-        let (out, st) = interpolate::<2>(
+        let (out, st) = interpolate::<[f64; 2]>(
             &cfg,
             &breaks,
             &mut |idx: &[usize]| {
@@ -244,7 +260,7 @@ mod tests {
     #[test]
     fn a_stretch_with_an_unsolved_end_is_solved_row_by_row() {
         let (cfg, breaks) = path();
-        let (out, _) = interpolate::<2>(
+        let (out, _) = interpolate::<[f64; 2]>(
             &cfg,
             &breaks,
             &mut |idx: &[usize]| {

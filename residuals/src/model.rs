@@ -365,7 +365,7 @@ impl ExtendedModel {
                 && (a[2] - b[2]).abs() <= DEFLECTION_TOLERANCE_RAD
         };
         let (deflection, st) =
-            crate::interpolation::interpolate::<3>(&cfg, &breaks, &mut solve, &within);
+            crate::interpolation::interpolate::<[f64; 3]>(&cfg, &breaks, &mut solve, &within);
         tracing::trace!(
             "loaded rows {}..{}: {} of {} solved ({} anchors, {} checks, {} bisected)",
             range.start,
