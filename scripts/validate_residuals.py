@@ -183,11 +183,7 @@ EFFECTS = {
 # Known failures: cases whose rules today's analysis does not hold, with why (docs/residuals.md,
 # "Validation"). --check reports their failures as expected instead of failing on them, and says
 # so when one passes; every other case must hold every rule.
-EXPECTED_FAILURES = {
-    "joint_springs-3x": "k_M 6-8 % low (845 against 900 N mm/rad): the first calibration takes "
-                        "part of the springs into the geometry, and the recalibration from the "
-                        "drawing that recovers 919 N mm/rad has the worse held-out error",
-}
+EXPECTED_FAILURES: dict = {}
 
 LOW = {"backlash": 0.1, "latency": 0.1, "creep": 0.1, "drift": 0.1, "joint_springs": 0.1,
        "external_load": 0.1, "frame": 0.1, "periodic": 0.1}
