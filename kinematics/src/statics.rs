@@ -454,6 +454,16 @@ pub struct LoadedSensitivity {
     pub d_loads: [[f64; 3]; 5],
 }
 
+/// A loaded equilibrium linearised ([`Robot::linearised_warm`]).
+struct Linearised {
+    rest: [(f64, f64); 3],
+    st: LoadedSetup,
+    z: VN,
+    segs: Segments,
+    f0: VN,
+    lu: nalgebra::LU<f64, nalgebra::Const<N>, nalgebra::Const<N>>,
+}
+
 /// Another robot for [`Robot::loaded_directions_warm`]: this one with one parameter of its
 /// drawing or tendon map changed by `step`.
 #[derive(Debug, Clone, Copy)]
@@ -989,6 +999,37 @@ impl Robot {
         self.load_response_at(&st, loads, &z)
     }
 
+    /// The loaded equilibrium along a series (solved as [`Robot::fk_loaded_warm`] does) with
+    /// what its first-order responses need: the residual there with the segments linearised,
+    /// and the factored Jacobian.
+    fn linearised_warm(
+        &self,
+        kappa: &[f64; 3],
+        loads: &Loads,
+        guess: &Pose,
+        warm: &mut LoadedWarm,
+    ) -> Result<Linearised, FkError> {
+        let rest = *warm.rest.get_or_insert_with(|| self.home_joint_angles());
+        let st = self.loaded_setup_at_rest(kappa, rest);
+        let z = match self.fk_loaded_warm_in(&st, kappa, loads, guess, warm) {
+            Ok(z) => z,
+            Err(_) => self.fk_loaded_in(&st, kappa, loads, guess)?,
+        };
+        let segs = self.segments_at(&st, loads, &z);
+        let f0 = self
+            .loaded_eval(&st, loads, &z, SegmentMode::Linear(&segs))
+            .res;
+        let lu = self.loaded_jacobian(&st, loads, &z, &segs, &f0).lu();
+        Ok(Linearised {
+            rest,
+            st,
+            z,
+            segs,
+            f0,
+            lu,
+        })
+    }
+
     /// The loaded equilibrium along a series (solved as [`Robot::fk_loaded_warm`] does, from
     /// the state `warm` carries) with its first-order responses to the curvatures and to the
     /// five load parameters: what a least-squares fit of parameters that act through the
@@ -1001,17 +1042,14 @@ impl Robot {
         guess: &Pose,
         warm: &mut LoadedWarm,
     ) -> Result<LoadedSensitivity, FkError> {
-        let rest = *warm.rest.get_or_insert_with(|| self.home_joint_angles());
-        let st = self.loaded_setup_at_rest(kappa, rest);
-        let z = match self.fk_loaded_warm_in(&st, kappa, loads, guess, warm) {
-            Ok(z) => z,
-            Err(_) => self.fk_loaded_in(&st, kappa, loads, guess)?,
-        };
-        let segs = self.segments_at(&st, loads, &z);
-        let f0 = self
-            .loaded_eval(&st, loads, &z, SegmentMode::Linear(&segs))
-            .res;
-        let lu = self.loaded_jacobian(&st, loads, &z, &segs, &f0).lu();
+        let Linearised {
+            rest,
+            st,
+            z,
+            segs,
+            f0,
+            lu,
+        } = self.linearised_warm(kappa, loads, guess, warm)?;
         let d_loads = self.load_columns(&st, loads, &z, &segs, &f0, &lu)?;
         // The curvatures change the segments themselves: their residual is integrated again
         // (the same fixed-step integration, smooth in the curvature).
@@ -1052,21 +1090,12 @@ impl Robot {
         directions: &[Direction<'_>],
         out: &mut [[f64; 3]],
     ) -> Result<Pose, FkError> {
-        let rest = *warm.rest.get_or_insert_with(|| self.home_joint_angles());
-        let st = self.loaded_setup_at_rest(kappa, rest);
-        let z = match self.fk_loaded_warm_in(&st, kappa, loads, guess, warm) {
-            Ok(z) => z,
-            Err(_) => self.fk_loaded_in(&st, kappa, loads, guess)?,
-        };
-        let segs = self.segments_at(&st, loads, &z);
-        let f0 = self
-            .loaded_eval(&st, loads, &z, SegmentMode::Linear(&segs))
-            .res;
-        let lu = self.loaded_jacobian(&st, loads, &z, &segs, &f0).lu();
+        let Linearised { st, z, lu, .. } = self.linearised_warm(kappa, loads, guess, warm)?;
         let exact = self.loaded_eval(&st, loads, &z, SegmentMode::Exact).res;
         for (d, o) in directions.iter().zip(out.iter_mut()) {
             let std = d.robot.loaded_setup_at_rest(&d.kappa, d.rest);
-            let ft = (d.robot.loaded_eval(&std, loads, &z, SegmentMode::Exact).res - exact) / d.step;
+            let ft =
+                (d.robot.loaded_eval(&std, loads, &z, SegmentMode::Exact).res - exact) / d.step;
             let dz = lu
                 .solve(&(-ft))
                 .ok_or(FkError::NoSolution { reached: 0.0 })?;

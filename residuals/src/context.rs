@@ -148,6 +148,23 @@ impl<'a> Context<'a> {
         (cfg, breaks)
     }
 
+    /// The rigid model's nuisance columns of every row ([`Nuisance::columns`]).
+    fn rigid_nuisance(&self, nui: &Nuisance) -> Vec<Vec<[f64; 3]>> {
+        (0..self.rows.len())
+            .into_par_iter()
+            .map(|i| {
+                let mut c = vec![[0.0; 3]; nui.n];
+                nui.columns(
+                    &self.model.robot,
+                    self.pred(&self.rows[i]),
+                    self.w_phi,
+                    &mut c,
+                );
+                c
+            })
+            .collect()
+    }
+
     /// The nuisance columns of every row under the loads of a loaded model
     /// ([`crate::nuisance::LoadedChanges`]); `None` for a model without loads. An exact model
     /// solves them at every row; otherwise the rigid columns are computed at every row and the
@@ -192,19 +209,7 @@ impl<'a> Context<'a> {
                 .collect();
             return Some(cols);
         }
-        let rigid: Vec<Vec<[f64; 3]>> = (0..self.rows.len())
-            .into_par_iter()
-            .map(|i| {
-                let mut c = vec![[0.0; 3]; n];
-                nui.columns(
-                    &self.model.robot,
-                    self.pred(&self.rows[i]),
-                    self.w_phi,
-                    &mut c,
-                );
-                c
-            })
-            .collect();
+        let rigid = self.rigid_nuisance(nui);
         let (cfg, breaks) = self.configuration_path();
         // The largest loaded column of each parameter over the rows solved so far.
         let scale = std::cell::RefCell::new(vec![0.0f64; n]);
@@ -290,19 +295,7 @@ impl<'a> Context<'a> {
                 if let Some(cols) = self.loaded_nuisance(&nui) {
                     return std::sync::Arc::new(NuisanceTable::new(nui, cols));
                 }
-                let cols = (0..self.rows.len())
-                    .into_par_iter()
-                    .map(|i| {
-                        let mut c = vec![[0.0; 3]; nui.n];
-                        nui.columns(
-                            &self.model.robot,
-                            self.pred(&self.rows[i]),
-                            self.w_phi,
-                            &mut c,
-                        );
-                        c
-                    })
-                    .collect();
+                let cols = self.rigid_nuisance(&nui);
                 std::sync::Arc::new(NuisanceTable::new(nui, cols))
             })
             .clone()
