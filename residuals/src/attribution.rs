@@ -642,7 +642,7 @@ impl<'a> Search<'a> {
         let ntest = ctx.test();
         let mut full_p = None;
         if let Some(n_candidates) = whole {
-            match judge_full_model(&self.ctx, &ctx, test, n_candidates, set) {
+            match judge_full_model(&self.ctx, &ctx, n_candidates, set) {
                 Err(why) => return Err(format!("{}; in the full model: {why}", s.note)),
                 Ok(p) => full_p = Some(p),
             }
@@ -785,22 +785,32 @@ fn near_miss(name: &str, s: &Score, opts: &Options) -> bool {
 }
 
 /// Whether the full model `after` (a near miss put in, everything refitted) earns its place
-/// against `before` on the held-out rows `test`: the linearised test's rules (the paired ratio
-/// test at the round's Bonferroni level, the smallest effect, the share of the structured
-/// residual) applied to the two full models. `Ok(p)` when it does, `Err(why not)`.
+/// against `before` on the held-out rows: the linearised test's rules (the paired ratio test
+/// at the round's Bonferroni level, the smallest effect, the share of the structured residual)
+/// applied to the two full models, each on its own held-out rows (a row index of one context is
+/// not the same row in another when a model does not predict some rows). `Ok(p)` when it does,
+/// `Err(why not)`.
 fn judge_full_model(
     before: &Context,
     after: &Context,
-    test: &[usize],
     n_candidates: usize,
     set: &Setting,
 ) -> Result<f64, String> {
     let nb = set.blocks.len();
-    let a = crate::scoring::sse_per_block(before, test, None, nb);
-    let b = crate::scoring::sse_per_block(after, test, None, nb);
+    let (tb, ta) = (before.test(), after.test());
+    if ta.len() + 5 < tb.len() {
+        return Err(format!(
+            "the full model does not predict {} of the held-out rows",
+            tb.len() - ta.len()
+        ));
+    }
+    let a = crate::scoring::sse_per_block(before, &tb, None, nb);
+    let b = crate::scoring::sse_per_block(after, &ta, None, nb);
     let p = crate::scoring::paired_ratio_p(&a, &b, &set.blocks.held_out);
-    let n = test.len().max(1) as f64;
-    let ms = [a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n];
+    let ms = [
+        a.iter().sum::<f64>() / tb.len().max(1) as f64,
+        b.iter().sum::<f64>() / ta.len().max(1) as f64,
+    ];
     let cmp = backward::Comparison {
         ms,
         p,
