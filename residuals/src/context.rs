@@ -174,7 +174,7 @@ impl<'a> Context<'a> {
     fn loaded_nuisance(&self, nui: &Nuisance) -> Option<Vec<Vec<[f64; 3]>>> {
         let loads = self.model.loads.filter(|l| !l.is_unloaded())?;
         let started = std::time::Instant::now();
-        let changes = nui.loaded_changes(&self.model.config)?;
+        let changes = nui.loaded_changes(&self.model.config, &self.model.robot, loads)?;
         let n = nui.n;
         let solve_rows = |idx: &[usize]| -> Vec<Option<Vec<[f64; 3]>>> {
             let parts: Vec<Vec<Option<Vec<[f64; 3]>>>> = self
@@ -187,8 +187,6 @@ impl<'a> Context<'a> {
                             let mut col = vec![[0.0; 3]; n];
                             nui.loaded_columns(
                                 &changes,
-                                &self.model.robot,
-                                &loads,
                                 self.pred(&self.rows[i]),
                                 self.w_phi,
                                 &mut warm,

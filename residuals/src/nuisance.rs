@@ -173,6 +173,9 @@ impl Nuisance {
 /// ([`pcr_kinematics::Robot::loaded_directions_warm`]).
 #[derive(Debug)]
 pub struct LoadedChanges {
+    /// The model's robot and loads.
+    robot: Robot,
+    loads: pcr_kinematics::statics::Loads,
     robots: Vec<Robot>,
     rest: Vec<[(f64, f64); 3]>,
     steps: Vec<f64>,
@@ -183,9 +186,14 @@ pub struct LoadedChanges {
 const LOADED_STEP: f64 = 1e-3;
 
 impl Nuisance {
-    /// The changed robots of the loaded columns around `config` (whose nuisance set this is);
-    /// `None` when one of them is not a valid robot.
-    pub fn loaded_changes(&self, config: &RobotConfig) -> Option<LoadedChanges> {
+    /// The changed robots of the loaded columns around `config` (whose nuisance set this is,
+    /// the model's `robot` under `loads`); `None` when one of them is not a valid robot.
+    pub fn loaded_changes(
+        &self,
+        config: &RobotConfig,
+        robot: &Robot,
+        loads: pcr_kinematics::statics::Loads,
+    ) -> Option<LoadedChanges> {
         let prior = self.prior();
         let mut robots = Vec::with_capacity(self.n);
         let mut rest = Vec::with_capacity(self.n);
@@ -202,20 +210,20 @@ impl Nuisance {
             steps.push(h);
         }
         Some(LoadedChanges {
+            robot: robot.clone(),
+            loads,
             robots,
             rest,
             steps,
         })
     }
 
-    /// The columns of a row predicted as `p` by the loaded model `robot` under `loads`
+    /// The columns of a row predicted as `p` by the loaded model of `changes`
     /// ([`LoadedChanges`]), warm-started along a series by `warm`; `false` (columns zero) when
     /// the equilibrium is not found.
     pub fn loaded_columns(
         &self,
         changes: &LoadedChanges,
-        robot: &Robot,
-        loads: &pcr_kinematics::statics::Loads,
         p: &Prediction,
         w_phi: f64,
         warm: &mut pcr_kinematics::statics::LoadedWarm,
@@ -240,8 +248,16 @@ impl Nuisance {
             })
             .collect();
         let guess = pcr_kinematics::Pose::new(pose[0], pose[1], pose[2]);
-        let ok = robot
-            .loaded_directions_warm(&p.kappa, loads, &guess, warm, &dirs, &mut out[..self.n])
+        let ok = changes
+            .robot
+            .loaded_directions_warm(
+                &p.kappa,
+                &changes.loads,
+                &guess,
+                warm,
+                &dirs,
+                &mut out[..self.n],
+            )
             .is_ok();
         if ok {
             for c in out.iter_mut().take(self.n) {

@@ -85,9 +85,9 @@ impl Linearised {
         let loaded = model
             .loads
             .filter(|l| !l.is_unloaded())
-            .and_then(|l| Some((l, nui.loaded_changes(&model.config)?)));
+            .and_then(|l| nui.loaded_changes(&model.config, &model.robot, l));
         let cols = match &loaded {
-            Some((loads, changes)) => {
+            Some(changes) => {
                 let mut per: Vec<Vec<(usize, usize)>> = Vec::new();
                 for &(s, k) in &at {
                     match per.last_mut() {
@@ -104,16 +104,8 @@ impl Linearised {
                                 let p = &preds[s][k];
                                 p.pose?;
                                 let mut c = vec![[0.0; 3]; nui.n];
-                                nui.loaded_columns(
-                                    changes,
-                                    &model.robot,
-                                    loads,
-                                    p,
-                                    w_phi,
-                                    &mut warm,
-                                    &mut c,
-                                )
-                                .then_some(c)
+                                nui.loaded_columns(changes, p, w_phi, &mut warm, &mut c)
+                                    .then_some(c)
                             })
                             .collect::<Vec<_>>()
                     })
