@@ -73,6 +73,48 @@ impl<'a> Context<'a> {
         Self::of_rows(series, model, blocks, w_phi, false)
     }
 
+    /// The rows of this context predicted by another model, in the same order with the same
+    /// blocks (the held-out rows too); `None` when the model does not predict one of them.
+    pub fn same_rows(&self, model: ExtendedModel) -> Option<Context<'a>> {
+        let started = std::time::Instant::now();
+        let mut want: Vec<std::collections::HashSet<usize>> =
+            vec![Default::default(); self.series.len()];
+        for r in &self.rows {
+            want[r.s].insert(r.k);
+        }
+        let preds: Vec<Vec<Prediction>> = self
+            .series
+            .iter()
+            .zip(&want)
+            .map(|(s, w)| model.predict_where(s, &|k| w.contains(&k)))
+            .collect();
+        let mut rows = Vec::with_capacity(self.rows.len());
+        for r in &self.rows {
+            let m = self.series[r.s].samples[r.k].pose?;
+            let p = preds[r.s][r.k].pose?;
+            let m = model.corrected(m);
+            rows.push(RowRef {
+                r: [m[0] - p[0], m[1] - p[1], self.w_phi * wrap(m[2] - p[2])],
+                ..*r
+            });
+        }
+        tracing::debug!(
+            rows = rows.len(),
+            seconds = started.elapsed().as_secs_f64(),
+            "context predicted on the same rows"
+        );
+        Some(Context {
+            series: self.series,
+            model,
+            preds,
+            rows,
+            w_phi: self.w_phi,
+            unpredicted: self.unpredicted,
+            nuisance: std::sync::OnceLock::new(),
+            loads: std::sync::OnceLock::new(),
+        })
+    }
+
     fn of_rows(
         series: &'a [Series],
         model: ExtendedModel,
