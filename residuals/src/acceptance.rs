@@ -53,16 +53,8 @@ pub(crate) fn accept<'a>(
                 .validate("extended robot")
                 .ok()
                 .and_then(|_| ExtendedModel::like(&cand, &ctx.model).ok())
-                .map(|m| Context::training(series, m, blocks, w_phi));
-            tracing::debug!(
-                frac,
-                rows = nctx.as_ref().map(|n| n.rows.len()),
-                n_train,
-                sse = nctx.as_ref().map(|n| n.sse(&n.train(), None)),
-                base_sse,
-                "acceptance try"
-            );
-            let nctx = nctx.filter(|n| n.rows.len() + 5 >= n_train);
+                .map(|m| Context::training(series, m, blocks, w_phi))
+                .filter(|n| n.rows.len() + 5 >= n_train);
             if let Some(nctx) = nctx {
                 let sse = nctx.sse(&nctx.train(), None);
                 if sse < base_sse {

@@ -92,9 +92,8 @@ impl<'a> Context<'a> {
         for r in &self.rows {
             let m = self.series[r.s].samples[r.k].pose?;
             let p = preds[r.s][r.k].pose?;
-            let m = model.corrected(m);
             rows.push(RowRef {
-                r: [m[0] - p[0], m[1] - p[1], self.w_phi * wrap(m[2] - p[2])],
+                r: model.residual(m, p, self.w_phi),
                 ..*r
             });
         }
@@ -141,15 +140,13 @@ impl<'a> Context<'a> {
                     unpredicted += 1;
                     continue;
                 };
-                let m = model.corrected(m);
-                let dphi = wrap(m[2] - p[2]);
                 let b = blocks.block[si][k];
                 rows.push(RowRef {
                     s: si,
                     k,
                     block: b,
                     held_out: blocks.held_out[b],
-                    r: [m[0] - p[0], m[1] - p[1], w_phi * dphi],
+                    r: model.residual(m, p, w_phi),
                 });
             }
         }
@@ -241,15 +238,18 @@ impl<'a> Context<'a> {
                 .collect();
             parts.into_iter().flatten().collect()
         };
+        let rigid = self.rigid_nuisance(nui);
         if self.model.exact {
+            // Every row solved; a row whose equilibrium is not found keeps its rigid columns,
+            // as an interpolated one does.
             let all: Vec<usize> = (0..self.rows.len()).collect();
             let cols = solve_rows(&all)
                 .into_iter()
-                .map(|c| c.unwrap_or_else(|| vec![[0.0; 3]; n]))
+                .zip(rigid)
+                .map(|(c, r)| c.unwrap_or(r))
                 .collect();
             return Some(cols);
         }
-        let rigid = self.rigid_nuisance(nui);
         let (cfg, breaks) = self.configuration_path();
         // The largest loaded column of each parameter over the rows solved so far.
         let scale = std::cell::RefCell::new(vec![0.0f64; n]);

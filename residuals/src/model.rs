@@ -477,6 +477,17 @@ impl ExtendedModel {
             .fold(m, |m, x| x.corrected(&self.config.effects, m))
     }
 
+    /// A row's residual, measured - predicted (x mm, y mm, and phi as `w_phi * dphi`, mm), the
+    /// measurement corrected by the effects ([`ExtendedModel::corrected`]).
+    pub fn residual(&self, measured: [f64; 3], predicted: [f64; 3], w_phi: f64) -> [f64; 3] {
+        let m = self.corrected(measured);
+        [
+            m[0] - predicted[0],
+            m[1] - predicted[1],
+            w_phi * crate::context::wrap(m[2] - predicted[2]),
+        ]
+    }
+
     /// The motor outputs of every row of a series (steps) before the play, when the model's
     /// effects are `effects`: the commands delayed (stage 1) and through the transmission
     /// (stage 2).

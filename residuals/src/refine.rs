@@ -279,10 +279,7 @@ impl Refit<'_> {
                     k += 1;
                     continue;
                 };
-                let m = model.corrected(m);
-                r[3 * k] = m[0] - p[0];
-                r[3 * k + 1] = m[1] - p[1];
-                r[3 * k + 2] = self.w_phi * wrap(m[2] - p[2]);
+                r[3 * k..3 * k + 3].copy_from_slice(&model.residual(m, p, self.w_phi));
                 k += 1;
             }
         }

@@ -98,6 +98,9 @@ pub(crate) fn fit(
             params: g.params,
             k: g.k,
             delta,
+            // The effect alone as first fitted, at the model's loads: it understates a large
+            // fit, so the parsimony rule (the effect preferred to a recalibration it covers)
+            // errs toward the recalibration, which the search then judges on the drawing.
             alone: f.alone,
             train_sse: g.train_sse,
             change: Box::new(move |c| {
