@@ -246,6 +246,13 @@ def cases(reduced: bool) -> list:
         for f in ([1.0] if reduced else [1.0, 3.0]):
             out.append(Case("+".join(t) + "-" + factor_name(f), [(e, f) for e in t], "triple",
                             [2.0] if f == 3.0 else []))
+    if reduced:
+        # What the loaded models' calibration columns and the re-linearised kineto-static fit
+        # hold: springs strong enough to bend the first calibration by millimetres, and springs
+        # beside a load at 3x.
+        out.append(single("joint_springs", 10.0, FALLBACK))
+        out.append(Case("joint_springs+external_load-3x",
+                        [("joint_springs", 3.0), ("external_load", 3.0)], "pair", [2.0]))
     for c in ([0.07] if reduced else [0.03, 0.07, 0.15]):
         out.append(Case("cross_coupling-%g" % (100 * c), [("cross_coupling", c)], "outside"))
     for a in ([0.03] if reduced else [0.01, 0.03, 0.1]):

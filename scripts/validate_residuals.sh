@@ -18,7 +18,8 @@
 #            [--only REGEX] [--out DIR] [--pcr PATH] [--recorder PATH] [--reuse] [--list]
 #            [--no-two-cores] [--max-z 3] [--max-after-floor 1.5] [--time-budget-s 10]
 #   --reduced   the CI subset: every effect at its test strength and 3x, one pair that mimics
-#               (backlash + latency), one triple, cross-coupling 7 %, the temperature cycle at
+#               (backlash + latency), one triple, joint springs at 10x and with a load at 3x,
+#               cross-coupling 7 %, the temperature cycle at
 #               0.03 mm, drift 0.002 mm/s (full-size recordings), the clean plant; seed 1; small
 #               recordings (calibration --points 6, holdout --points 4); default OUT
 #               out/validate-residuals-reduced (full: out/validate-residuals, seeds 1,2,3)
