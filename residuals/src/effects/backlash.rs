@@ -172,7 +172,7 @@ impl Effect for Backlash {
         })
     }
 
-    fn declared(&self, effects: &Effects) -> Option<Vec<Estimate>> {
+    fn declared(&self, effects: &Effects, _fitted: &[Estimate]) -> Option<Vec<Estimate>> {
         effects.backlash.as_ref().map(|b| {
             (0..3)
                 .map(|i| Estimate::new(&format!("play motor {}", i + 1), b.steps[i], None, "steps"))

@@ -142,7 +142,7 @@ impl Effect for Creep {
         })
     }
 
-    fn declared(&self, effects: &Effects) -> Option<Vec<Estimate>> {
+    fn declared(&self, effects: &Effects, _fitted: &[Estimate]) -> Option<Vec<Estimate>> {
         effects.creep.as_ref().map(|cr| {
             let mut v: Vec<Estimate> = (0..3)
                 .map(|i| Estimate::new(&format!("gain leg {}", i + 1), cr.gain[i], None, "mm/mm"))

@@ -105,7 +105,7 @@ impl Effect for Drift {
         })
     }
 
-    fn declared(&self, effects: &Effects) -> Option<Vec<Estimate>> {
+    fn declared(&self, effects: &Effects, _fitted: &[Estimate]) -> Option<Vec<Estimate>> {
         effects.drift.as_ref().map(|d| {
             (0..3)
                 .map(|i| {

@@ -39,7 +39,7 @@ impl Effect for ExternalLoad {
         compliance::fit(ctx, train, self.name(), &[0, 1, 2])
     }
 
-    fn declared(&self, effects: &Effects) -> Option<Vec<Estimate>> {
+    fn declared(&self, effects: &Effects, _fitted: &[Estimate]) -> Option<Vec<Estimate>> {
         effects.compliance.as_ref().map(|k| {
             vec![
                 Estimate::new("force x", k.force_n[0], None, "N"),

@@ -89,7 +89,7 @@ impl Effect for Frame {
         })
     }
 
-    fn declared(&self, effects: &Effects) -> Option<Vec<Estimate>> {
+    fn declared(&self, effects: &Effects, _fitted: &[Estimate]) -> Option<Vec<Estimate>> {
         effects.frame.as_ref().map(|f| {
             vec![
                 Estimate::new("dx", f.dx_mm, None, "mm"),

@@ -41,7 +41,7 @@ impl Effect for JointSprings {
         compliance::fit(ctx, train, self.name(), &[3, 4])
     }
 
-    fn declared(&self, effects: &Effects) -> Option<Vec<Estimate>> {
+    fn declared(&self, effects: &Effects, _fitted: &[Estimate]) -> Option<Vec<Estimate>> {
         effects.compliance.as_ref().map(|k| {
             vec![
                 Estimate::new("k_M", k.k_m_n_mm_per_rad, None, "N mm/rad"),

@@ -79,7 +79,7 @@ impl Effect for Latency {
         })
     }
 
-    fn declared(&self, effects: &Effects) -> Option<Vec<Estimate>> {
+    fn declared(&self, effects: &Effects, _fitted: &[Estimate]) -> Option<Vec<Estimate>> {
         effects
             .latency
             .as_ref()

@@ -119,9 +119,9 @@ pub trait Effect: Extension {
     }
 
     /// Its parameters as the robot file declares them (without standard errors), as its fit
-    /// names them; `None` when the file does not declare it or the fitted values stand (the
-    /// default).
-    fn declared(&self, _effects: &Effects) -> Option<Vec<Estimate>> {
+    /// `fitted` names them (`fitted` also tells which entry, for an effect that holds several);
+    /// `None` when the file does not declare it or the fitted values stand (the default).
+    fn declared(&self, _effects: &Effects, _fitted: &[Estimate]) -> Option<Vec<Estimate>> {
         None
     }
 

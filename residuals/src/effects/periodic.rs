@@ -35,6 +35,15 @@ pub fn apply(q: &mut [[f64; 3]], periodic: &[robot::Periodic]) {
     }
 }
 
+/// Which term of `effects` has the motor and the period of `params`.
+fn term(effects: &Effects, params: &[Estimate]) -> Option<usize> {
+    let value = |n: &str| params.iter().find(|p| p.name == n).map(|p| p.value);
+    effects.periodic.iter().position(|t| {
+        value("motor").is_some_and(|m| (m - f64::from(t.motor)).abs() < 0.5)
+            && value("period").is_some_and(|p| (p - t.period_steps).abs() < 1e-6)
+    })
+}
+
 impl Extension for Periodic {
     /// Every declared term.
     fn transmission(&self, effects: &Effects, q: &mut [[f64; 3]]) {
@@ -199,18 +208,22 @@ impl Effect for Periodic {
 
     /// The term of the motor and period it was added with (the last term if they match none).
     fn remove(&self, effects: &mut Effects, params: &[Estimate]) {
-        let value = |n: &str| params.iter().find(|p| p.name == n).map(|p| p.value);
-        let at = effects
-            .periodic
-            .iter()
-            .position(|t| {
-                value("motor").is_some_and(|m| (m - f64::from(t.motor)).abs() < 0.5)
-                    && value("period").is_some_and(|p| (p - t.period_steps).abs() < 1e-6)
-            })
-            .or(effects.periodic.len().checked_sub(1));
-        if let Some(i) = at {
+        if let Some(i) = term(effects, params).or(effects.periodic.len().checked_sub(1)) {
             effects.periodic.remove(i);
         }
+    }
+
+    /// The term of the motor and period it was fitted with, as the file holds it now (the joint
+    /// refinement and the calibration from the drawing move its amplitude and phase after the
+    /// round's linearised fit).
+    fn declared(&self, effects: &Effects, fitted: &[Estimate]) -> Option<Vec<Estimate>> {
+        let t = &effects.periodic[term(effects, fitted)?];
+        Some(vec![
+            Estimate::new("motor", f64::from(t.motor), None, ""),
+            Estimate::new("period", t.period_steps, None, "steps"),
+            Estimate::new("amplitude", t.amplitude_steps, None, "steps"),
+            Estimate::new("phase", t.phase_deg, None, "deg"),
+        ])
     }
 
     fn file_position(&self) -> u8 {
@@ -255,5 +268,50 @@ impl Effect for Periodic {
                 p.amplitude_steps = lerp(a0, p.amplitude_steps, s);
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn term(motor: u8, period: f64, amplitude: f64, phase: f64) -> robot::Periodic {
+        robot::Periodic {
+            motor,
+            period_steps: period,
+            amplitude_steps: amplitude,
+            phase_deg: phase,
+        }
+    }
+
+    /// The report gives the term the file holds after the refinements, not the round's
+    /// linearised fit (periodic-10x: 9.883 reported while the file held 10.014).
+    #[test]
+    fn the_declared_term_is_the_one_of_the_fits_motor_and_period() {
+        let mut e = Effects {
+            periodic: vec![term(1, 32.0, 0.5, 10.0), term(3, 64.0, 10.014, 29.93)],
+            ..Effects::default()
+        };
+        let fitted = vec![
+            Estimate::new("motor", 3.0, None, ""),
+            Estimate::new("period", 64.0, None, "steps"),
+            Estimate::new("amplitude", 9.883, Some(0.003), "steps"),
+            Estimate::new("phase", 29.97, Some(0.02), "deg"),
+        ];
+        let d = Periodic.declared(&e, &fitted).expect("declared");
+        let value = |n: &str| d.iter().find(|p| p.name == n).map(|p| p.value);
+        assert_eq!(value("motor"), Some(3.0));
+        assert_eq!(value("period"), Some(64.0));
+        assert_eq!(value("amplitude"), Some(10.014));
+        assert_eq!(value("phase"), Some(29.93));
+        // A term the file no longer holds is not reported from the file.
+        let other = vec![
+            Estimate::new("motor", 2.0, None, ""),
+            Estimate::new("period", 64.0, None, "steps"),
+        ];
+        assert!(Periodic.declared(&e, &other).is_none());
+        // Removing takes out that term, not the last one.
+        Periodic.remove(&mut e, &fitted[..2]);
+        assert_eq!(e.periodic, vec![term(1, 32.0, 0.5, 10.0)]);
     }
 }
