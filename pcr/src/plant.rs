@@ -562,19 +562,14 @@ fn draw_state(
 mod tests {
     use super::*;
 
-    fn tmp(name: &str) -> PathBuf {
-        let d = std::env::temp_dir().join(format!("pcr-plant-cli-{}", std::process::id()));
-        std::fs::create_dir_all(&d).unwrap();
-        d.join(name)
-    }
-
     /// Every effect off: the recording's measured pose at row k is the static model at the
     /// setpoint of row k - 1 (reached within its cycle), and equals the true columns.
     #[test]
     fn ideal_recording_equals_the_static_model() {
         let robot = RobotConfig::nominal();
         let cfg = PlantConfig::ideal();
-        let input = tmp("setpoints.csv");
+        let dir = tempfile::tempdir().unwrap();
+        let input = dir.path().join("setpoints.csv");
         let mut text = String::from("t_s,q1,q2,q3,pose_id,settled\n");
         for k in 0..40 {
             let q = [176 + k, 176 - k / 2, 176 + k / 3];
@@ -589,7 +584,7 @@ mod tests {
             );
         }
         std::fs::write(&input, text).unwrap();
-        let output = tmp("rec.csv");
+        let output = dir.path().join("rec.csv");
         let common = Common {
             plant: None,
             robot: None,
@@ -621,9 +616,10 @@ mod tests {
 
     #[test]
     fn pose_names_the_bad_line() {
-        let input = tmp("steps.csv");
+        let dir = tempfile::tempdir().unwrap();
+        let input = dir.path().join("steps.csv");
         std::fs::write(&input, "q1,q2,q3\n176,176,176\n176,x,176\n").unwrap();
-        let out = tmp("pose.csv");
+        let out = dir.path().join("pose.csv");
         let e = pose(
             &RobotConfig::nominal(),
             &PlantConfig::ideal(),
