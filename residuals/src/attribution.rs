@@ -604,11 +604,7 @@ impl<'a> Search<'a> {
         // that its linearisation overstates is still fitted in full.
         let mut linearised = self.config.clone();
         (f.change)(&mut linearised);
-        let bad: Vec<String> = effects::in_file_order()
-            .iter()
-            .rev()
-            .filter_map(|e| e.unphysical(&linearised.effects, 2.0 * set.opts.max_geometry_change))
-            .collect();
+        let bad = effects_unphysical(&linearised, 2.0 * set.opts.max_geometry_change);
         if !bad.is_empty() {
             return Err(format!("unphysical (linearised): {}", bad.join(", ")));
         }
@@ -629,7 +625,7 @@ impl<'a> Search<'a> {
         )
         .ok_or_else(|| "the full model does not lower the training error".to_string())?;
         let (config, ctx) = from_drawing(config, ctx, set);
-        let bad = effects_unphysical(&config, set.opts);
+        let bad = effects_unphysical(&config, set.opts.max_geometry_change);
         let leaves = leaves_drawing(&config, &self.config, set.drawing, set.opts);
         if !bad.is_empty() {
             let all: Vec<String> = leaves.into_iter().chain(bad).collect();

@@ -21,18 +21,19 @@ pub(crate) fn unphysical(
     let mut why: Vec<String> = leaves_drawing(c, current, drawing, opts)
         .into_iter()
         .collect();
-    why.extend(effects_unphysical(c, opts));
+    why.extend(effects_unphysical(c, opts.max_geometry_change));
     (!why.is_empty()).then(|| format!("unphysical: {}", why.join(", ")))
 }
 
 /// Why the effects `c` declares are not physical (springs or creep of the wrong sign, a
 /// capture frame beyond a registration error, a motion that leads its command), from the last
-/// entry of the robot file back to the first; empty when they are.
-pub(crate) fn effects_unphysical(c: &RobotConfig, opts: &Options) -> Vec<String> {
+/// entry of the robot file back to the first; empty when they are. `max_change`: the
+/// geometry's tolerance, mm or deg (`Options::max_geometry_change`), which scales the frame's.
+pub(crate) fn effects_unphysical(c: &RobotConfig, max_change: f64) -> Vec<String> {
     effects::in_file_order()
         .iter()
         .rev()
-        .filter_map(|e| e.unphysical(&c.effects, opts.max_geometry_change))
+        .filter_map(|e| e.unphysical(&c.effects, max_change))
         .collect()
 }
 

@@ -29,8 +29,8 @@ fn slots(e: &Effects) -> Vec<Parameter> {
         .collect()
 }
 
-/// The continuous parameters of every effect `e` declares ([`slots`]' order): what the debug
-/// log shows of a refinement's or an alternation's result.
+/// The continuous parameters of every effect `e` declares ([`slots`]' order): the iterates the
+/// joint estimation from the drawing extrapolates, and the refinement's start.
 pub(crate) fn values(e: &Effects) -> Vec<f64> {
     slots(e).iter().map(|s| (s.get)(e, s.index)).collect()
 }
@@ -403,10 +403,7 @@ pub fn refine(
         })
         .collect();
     let n = rows.iter().map(Vec::len).sum();
-    let x0: Vec<f64> = slots
-        .iter()
-        .map(|s| (s.get)(&config.effects, s.index))
-        .collect();
+    let x0 = values(&config.effects);
     let mut lo: Vec<f64> = slots.iter().map(|s| s.lo).collect();
     let mut hi: Vec<f64> = slots.iter().map(|s| s.hi).collect();
     let mut x0: Vec<f64> = x0
