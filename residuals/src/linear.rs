@@ -175,12 +175,12 @@ pub fn solve_joint(
 /// a 0.4 N load +- 0.008 N, 3 errors off). Weighed 1e-4 the errors are the data's (+- 0.5 mm,
 /// +- 0.017 N), and a direction the data do not see at all keeps a finite error a hundred
 /// times the prior's instead of none.
-const PRIOR_IN_ERRORS: f64 = 1e-4;
+pub(crate) const PRIOR_IN_ERRORS: f64 = 1e-4;
 
 /// The pseudo-inverse of the symmetric matrix `m` scaled to a unit diagonal, with the scales
 /// (singular values below 1e-10 of the largest dropped); `None` when `m` is not finite (the
 /// decomposition would not end).
-fn scaled_pinv(m: &DMatrix<f64>) -> Option<(DMatrix<f64>, Vec<f64>)> {
+pub(crate) fn scaled_pinv(m: &DMatrix<f64>) -> Option<(DMatrix<f64>, Vec<f64>)> {
     if m.iter().any(|v| !v.is_finite()) {
         return None;
     }
@@ -253,7 +253,7 @@ fn finish(
 /// small (a periodic amplitude 3.014 +- 0.0037 steps for a truth of 3). Clusters of whole blocks
 /// keep what is correlated inside a block together. `pinv` is the inverse of the normal matrix
 /// scaled by `s` (`A^T A = S (pinv)^-1 S`).
-fn standard_errors(
+pub(crate) fn standard_errors(
     blocks: &[(DMatrix<f64>, DVector<f64>)],
     pinv: &DMatrix<f64>,
     s: &[f64],

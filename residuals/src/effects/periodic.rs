@@ -44,6 +44,33 @@ fn term(effects: &Effects, params: &[Estimate]) -> Option<usize> {
     })
 }
 
+/// The term `held` plus the addition `added` (a fit's parameters: amplitude and phase, with
+/// errors) as one term: A sin(x + phase) adds as the phasor A e^(i phase). The amplitude keeps
+/// the addition's error, the phase its error over the summed amplitude.
+fn with_held(held: &robot::Periodic, added: &[Estimate]) -> Vec<Estimate> {
+    let get = |n: &str| added.iter().find(|p| p.name == n);
+    let (Some(a), Some(ph)) = (get("amplitude"), get("phase")) else {
+        return added.to_vec();
+    };
+    let (p0, p1) = (held.phase_deg.to_radians(), ph.value.to_radians());
+    let s = held.amplitude_steps * p0.cos() + a.value * p1.cos();
+    let c = held.amplitude_steps * p0.sin() + a.value * p1.sin();
+    let amp = s.hypot(c);
+    added
+        .iter()
+        .map(|p| match p.name.as_str() {
+            "amplitude" => Estimate::new("amplitude", amp, p.std, &p.unit),
+            "phase" => Estimate::new(
+                "phase",
+                c.atan2(s).to_degrees(),
+                a.std.map(|e| (e / amp.max(1e-12)).to_degrees()),
+                &p.unit,
+            ),
+            _ => p.clone(),
+        })
+        .collect()
+}
+
 impl Extension for Periodic {
     /// Every declared term.
     fn transmission(&self, effects: &Effects, q: &mut [[f64; 3]]) {
@@ -195,12 +222,18 @@ impl Effect for Periodic {
     }
 
     /// The motor and the period of the whole fit `whole`, their amplitude and phase fitted
-    /// again: a part of the data holds too few positions of a motor to scan them afresh.
+    /// again: a part of the data holds too few positions of a motor to scan them afresh. Where
+    /// the model already holds that term, the part's fit is what it adds to it, and the term
+    /// reported is the sum ([`with_held`]): the phase of a near-zero addition says nothing.
     fn fit_like(&self, ctx: &Context, train: &[usize], whole: &[Estimate]) -> Option<Fitted> {
         let value = |n: &str| whole.iter().find(|p| p.name == n).map(|p| p.value);
         match (value("motor"), value("period")) {
             (Some(m), Some(p)) if (1.0..=3.0).contains(&m) => {
-                self.fit_searched(ctx, train, Some((m.round() as usize - 1, p)))
+                let mut f = self.fit_searched(ctx, train, Some((m.round() as usize - 1, p)))?;
+                if let Some(i) = term(&ctx.model.config.effects, whole) {
+                    f.params = with_held(&ctx.model.config.effects.periodic[i], &f.params);
+                }
+                Some(f)
             }
             _ => self.fit(ctx, train),
         }
@@ -282,6 +315,37 @@ mod tests {
             amplitude_steps: amplitude,
             phase_deg: phase,
         }
+    }
+
+    /// A part's fit around a model that holds the term is the term plus the part's addition:
+    /// a near-zero addition leaves the held term (its phase does not count), an addition in
+    /// phase adds to the amplitude.
+    #[test]
+    fn a_parts_addition_is_reported_with_the_held_term() {
+        let held = term(3, 64.0, 10.0, 30.0);
+        let added = |amp: f64, phase: f64| {
+            vec![
+                Estimate::new("motor", 3.0, None, ""),
+                Estimate::new("period", 64.0, None, "steps"),
+                Estimate::new("amplitude", amp, Some(0.01), "steps"),
+                Estimate::new("phase", phase, Some(40.0), "deg"),
+            ]
+        };
+        let value = |v: &[Estimate], n: &str| v.iter().find(|p| p.name == n).unwrap().value;
+        let tiny = with_held(&held, &added(0.004, -150.0));
+        assert!((value(&tiny, "amplitude") - 9.996).abs() < 1e-3, "{tiny:?}");
+        assert!((value(&tiny, "phase") - 30.0).abs() < 0.02, "{tiny:?}");
+        let std = tiny
+            .iter()
+            .find(|p| p.name == "phase")
+            .unwrap()
+            .std
+            .unwrap();
+        assert!((std - (0.01f64 / 9.996).to_degrees()).abs() < 1e-6);
+        let same = with_held(&held, &added(0.5, 30.0));
+        assert!((value(&same, "amplitude") - 10.5).abs() < 1e-9);
+        assert!((value(&same, "phase") - 30.0).abs() < 1e-9);
+        assert_eq!(value(&same, "period"), 64.0);
     }
 
     /// The report gives the term the file holds after the refinements, not the round's
