@@ -708,11 +708,11 @@ impl<'a> Search<'a> {
 impl<'a> Search<'a> {
     /// The final estimate of every effect's parameters, with their errors ([`values`]' order,
     /// the solver's units): a last joint refinement on every training row where the model is
-    /// unloaded (up to [`FINAL_ROW_PARAMETERS`]; kept when it lowers the training error), on the refinements' 3000
-    /// rows under loads (a loaded refinement on every row would cost 10 s), where only its
-    /// errors are taken. The refinements of the search use 3000 rows, and the values they leave
-    /// carry those rows' noise (periodic-10x: 10.014 +- 0.0032 steps, 4.3 errors off; on every
-    /// row 10.004).
+    /// unloaded (up to [`FINAL_ROW_PARAMETERS`]; kept when it lowers the training error); under
+    /// loads (a loaded refinement on every row would cost 10 s) only the errors at the point
+    /// the search left, from the Jacobian on the refinements' 3000 rows. The refinements of the
+    /// search use 3000 rows, and the values they leave carry those rows' noise (periodic-10x:
+    /// 10.014 +- 0.0032 steps, 4.3 errors off; on every row 10.004).
     ///
     /// [`values`]: crate::refine::values
     fn final_estimate(&mut self, set: &Setting<'a, '_>) -> Option<Vec<f64>> {
@@ -741,7 +741,8 @@ impl<'a> Search<'a> {
             set.w_phi,
             rows,
             true,
-            FINAL_EVALUATIONS,
+            // Under loads only the errors at the point the search left: its Jacobian.
+            if loaded { 1 } else { FINAL_EVALUATIONS },
         );
         if loaded || refined == self.config {
             return std;
@@ -767,7 +768,7 @@ impl<'a> Search<'a> {
             set.w_phi,
             3000,
             true,
-            FINAL_EVALUATIONS,
+            1,
         )
         .1
     }

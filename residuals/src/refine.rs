@@ -610,12 +610,9 @@ mod tests {
         Backlash, Compliance, Creep, Drift, FrameCorrection, Latency, Periodic,
     };
 
-    /// The errors of the solver's parameters come out in the units the report gives, for the
-    /// effect asked and no other: a drift rate is refined in mm per 1000 s and reported in mm/s,
-    /// and its slots come after the latency's and the backlash's.
-    #[test]
-    fn the_refinements_errors_are_reported_in_the_effects_units() {
-        let e = Effects {
+    /// A latency of 10 ms, plays of 1 / 2 / 3 steps and drift rates of 4 / 5 / 6 um/s.
+    fn latency_backlash_drift() -> Effects {
+        Effects {
             latency: Some(Latency { latency_s: 0.01 }),
             backlash: Some(Backlash {
                 steps: [1.0, 2.0, 3.0],
@@ -624,7 +621,15 @@ mod tests {
                 rate_mm_per_s: [4e-3, 5e-3, 6e-3],
             }),
             ..Effects::default()
-        };
+        }
+    }
+
+    /// The errors of the solver's parameters come out in the units the report gives, for the
+    /// effect asked and no other: a drift rate is refined in mm per 1000 s and reported in mm/s,
+    /// and its slots come after the latency's and the backlash's.
+    #[test]
+    fn the_refinements_errors_are_reported_in_the_effects_units() {
+        let e = latency_backlash_drift();
         // latency, three plays, three rates.
         let sd = [0.001, 0.1, 0.2, 0.3, 0.5, 0.25, 2.0];
         let named = |n: &str| crate::effects::named(n).unwrap();
@@ -659,16 +664,9 @@ mod tests {
     #[test]
     fn the_parameters_are_in_the_robot_files_order() {
         let e = Effects {
-            latency: Some(Latency { latency_s: 0.01 }),
-            backlash: Some(Backlash {
-                steps: [1.0, 2.0, 3.0],
-            }),
             creep: Some(Creep {
                 gain: [0.1, 0.2, 0.3],
                 time_constant_s: 1.0,
-            }),
-            drift: Some(Drift {
-                rate_mm_per_s: [4e-3, 5e-3, 6e-3],
             }),
             compliance: Some(Compliance {
                 ei_n_mm2: 6.5e4,
@@ -688,6 +686,7 @@ mod tests {
                 amplitude_steps: 15.0,
                 phase_deg: 16.0,
             }],
+            ..latency_backlash_drift()
         };
         let values: Vec<f64> = slots(&e).iter().map(|s| (s.get)(&e, s.index)).collect();
         let expected = [
