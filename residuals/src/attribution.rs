@@ -719,13 +719,17 @@ impl<'a> Search<'a> {
         if self.added.is_empty() {
             return None;
         }
-        let loaded = self.ctx.model.loads.is_some_and(|l| !l.is_unloaded());
-        let n_params = crate::refine::values(&self.config.effects).len()
-            + crate::nuisance::Nuisance::of(&self.config).n;
-        let rows = if loaded {
-            3000
-        } else {
-            (FINAL_ROW_PARAMETERS / n_params.max(1)).max(3000)
+        let refine = |config: &RobotConfig, rows: usize, evaluations: usize| {
+            crate::refine::refine_with_errors(
+                config,
+                &self.ctx.model,
+                set.series,
+                set.blocks,
+                set.w_phi,
+                rows,
+                true,
+                evaluations,
+            )
         };
         set.opts.progress.stage(
             0,
@@ -733,18 +737,16 @@ impl<'a> Search<'a> {
             self.ctx.rows.len(),
             0,
         );
-        let (refined, std) = crate::refine::refine_with_errors(
-            &self.config,
-            &self.ctx.model,
-            set.series,
-            set.blocks,
-            set.w_phi,
-            rows,
-            true,
-            // Under loads only the errors at the point the search left: its Jacobian.
-            if loaded { 1 } else { FINAL_EVALUATIONS },
-        );
-        if loaded || refined == self.config {
+        // Under loads only the errors at the point the search left: its Jacobian (one
+        // evaluation) on the search's rows.
+        if self.ctx.model.loads.is_some_and(|l| !l.is_unloaded()) {
+            return refine(&self.config, crate::refine::SEARCH_ROWS, 1).1;
+        }
+        let n_params = crate::refine::values(&self.config.effects).len()
+            + crate::nuisance::Nuisance::of(&self.config).n;
+        let rows = (FINAL_ROW_PARAMETERS / n_params.max(1)).max(crate::refine::SEARCH_ROWS);
+        let (refined, std) = refine(&self.config, rows, FINAL_EVALUATIONS);
+        if refined == self.config {
             return std;
         }
         let train = self.ctx.train();
@@ -759,18 +761,8 @@ impl<'a> Search<'a> {
             self.ctx = ctx;
             return std;
         }
-        // Kept where it was: the errors of the 3000 rows' estimate.
-        crate::refine::refine_with_errors(
-            &self.config,
-            &self.ctx.model,
-            set.series,
-            set.blocks,
-            set.w_phi,
-            3000,
-            true,
-            1,
-        )
-        .1
+        // Kept where it was: the errors there, on the search's rows.
+        refine(&self.config, crate::refine::SEARCH_ROWS, 1).1
     }
 
     /// Plausibility on the joint solution: effects taken in while the geometry left the drawing
@@ -989,7 +981,13 @@ fn from_drawing<'a>(
         |config: &RobotConfig, ctx: &Context<'a>| -> Option<(RobotConfig, Context<'a>)> {
             let cal = crate::recalibration::recalibrated(config, ctx, set.drawing, recal)?;
             let refined = crate::refine::refine(
-                &cal, &ctx.model, set.series, set.blocks, set.w_phi, 3000, true,
+                &cal,
+                &ctx.model,
+                set.series,
+                set.blocks,
+                set.w_phi,
+                crate::refine::SEARCH_ROWS,
+                true,
             );
             let model = ExtendedModel::like(&refined, &ctx.model).ok()?;
             let full = Context::new(set.series, model, set.blocks, set.w_phi);

@@ -86,7 +86,13 @@ pub(crate) fn without<'a>(
     let mut cfg = config.clone();
     effect.remove(&mut cfg.effects, params);
     let refined = crate::refine::refine(
-        &cfg, &ctx.model, set.series, set.blocks, set.w_phi, 3000, true,
+        &cfg,
+        &ctx.model,
+        set.series,
+        set.blocks,
+        set.w_phi,
+        crate::refine::SEARCH_ROWS,
+        true,
     );
     let model = ExtendedModel::like(&refined, &ctx.model).ok()?;
     let mut rctx = Context::new(set.series, model, set.blocks, set.w_phi);

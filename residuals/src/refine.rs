@@ -88,6 +88,14 @@ pub(crate) fn reported_errors(
     Vec::new()
 }
 
+/// Training rows the joint refinements of the search run on (every so many of them): a loaded
+/// refinement's evaluation costs about 0.1 s on these; the final estimate
+/// ([`refine_with_errors`]) says what their noise does to the values.
+pub(crate) const SEARCH_ROWS: usize = 3000;
+
+/// Most evaluations of the model in a refinement of the search (7-13 reach the tolerance).
+const MAX_EVALUATIONS: usize = 200;
+
 struct Refit<'a> {
     base: &'a RobotConfig,
     like: &'a ExtendedModel,
@@ -423,13 +431,14 @@ pub fn refine(
         w_phi,
         max_rows,
         calibration,
-        200,
+        MAX_EVALUATIONS,
     )
     .0
 }
 
-/// [`refine`] (at most `max_evaluations` of the model), with the standard errors of the effects' parameters ([`values`]' order, the
-/// solver's units) on the rows it refined on: clustered by time block as the linear fits'
+/// [`refine`] (at most `max_evaluations` of the model), with the standard errors of the
+/// effects' parameters ([`values`]' order, the solver's units) on the rows it refined on:
+/// clustered by time block as the linear fits'
 /// ([`crate::linear::standard_errors`]), the calibration parameters' prior weighed as in theirs
 /// ([`crate::linear::PRIOR_IN_ERRORS`]). `None` when there is nothing to refine or the solver
 /// fails.
