@@ -100,15 +100,7 @@ pub(crate) fn accept<'a>(
     }
     let (cfg, _, sse) = cur?;
     // Every effect's parameters together on the full model.
-    let refined = crate::refine::refine(
-        &cfg,
-        &ctx.model,
-        series,
-        blocks,
-        w_phi,
-        crate::refine::SEARCH_ROWS,
-        true,
-    );
+    let refined = crate::refine::search(&cfg, &ctx.model, series, blocks, w_phi);
     if refined != cfg {
         if let Ok(model) = ExtendedModel::like(&refined, &ctx.model) {
             let rctx = Context::new(series, model, blocks, w_phi);

@@ -977,22 +977,15 @@ fn from_drawing<'a>(
     };
     // One alternation from (config, ctx): the calibration from the drawing with its effects,
     // then its effects refined on it.
-    let alternate =
-        |config: &RobotConfig, ctx: &Context<'a>| -> Option<(RobotConfig, Context<'a>)> {
-            let cal = crate::recalibration::recalibrated(config, ctx, set.drawing, recal)?;
-            let refined = crate::refine::refine(
-                &cal,
-                &ctx.model,
-                set.series,
-                set.blocks,
-                set.w_phi,
-                crate::refine::SEARCH_ROWS,
-                true,
-            );
-            let model = ExtendedModel::like(&refined, &ctx.model).ok()?;
-            let full = Context::new(set.series, model, set.blocks, set.w_phi);
-            (full.rows.len() + 5 >= ctx.rows.len()).then_some((refined, full))
-        };
+    let alternate = |config: &RobotConfig,
+                     ctx: &Context<'a>|
+     -> Option<(RobotConfig, Context<'a>)> {
+        let cal = crate::recalibration::recalibrated(config, ctx, set.drawing, recal)?;
+        let refined = crate::refine::search(&cal, &ctx.model, set.series, set.blocks, set.w_phi);
+        let model = ExtendedModel::like(&refined, &ctx.model).ok()?;
+        let full = Context::new(set.series, model, set.blocks, set.w_phi);
+        (full.rows.len() + 5 >= ctx.rows.len()).then_some((refined, full))
+    };
     let mut best_ms = held_out(&ctx);
     // The effects' parameters of every iterate, the first one included.
     let mut iterates = vec![crate::refine::values(&config.effects)];

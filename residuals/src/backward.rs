@@ -85,15 +85,7 @@ pub(crate) fn without<'a>(
     let effect = effects::named(name)?;
     let mut cfg = config.clone();
     effect.remove(&mut cfg.effects, params);
-    let refined = crate::refine::refine(
-        &cfg,
-        &ctx.model,
-        set.series,
-        set.blocks,
-        set.w_phi,
-        crate::refine::SEARCH_ROWS,
-        true,
-    );
+    let refined = crate::refine::search(&cfg, &ctx.model, set.series, set.blocks, set.w_phi);
     let model = ExtendedModel::like(&refined, &ctx.model).ok()?;
     let mut rctx = Context::new(set.series, model, set.blocks, set.w_phi);
     let nb = set.blocks.len();

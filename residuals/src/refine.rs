@@ -436,6 +436,18 @@ pub fn refine(
     .0
 }
 
+/// [`refine`] as the search runs it: on [`SEARCH_ROWS`] of the training rows, with the
+/// calibration parameters.
+pub(crate) fn search(
+    config: &RobotConfig,
+    like: &ExtendedModel,
+    series: &[Series],
+    blocks: &Blocks,
+    w_phi: f64,
+) -> RobotConfig {
+    refine(config, like, series, blocks, w_phi, SEARCH_ROWS, true)
+}
+
 /// [`refine`] (at most `max_evaluations` of the model), with the standard errors of the
 /// effects' parameters ([`values`]' order, the solver's units) on the rows it refined on:
 /// clustered by time block as the linear fits'
