@@ -347,3 +347,94 @@ impl NuisanceTable {
         out
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use pcr_robot::{MapForm, TendonMapKind, TendonMapSpec};
+
+    /// The pose (x mm, y mm, phi rad) and curvatures of the robot `cfg` at motor positions `q`.
+    fn pose_at(cfg: &RobotConfig, q: [f64; 3]) -> ([f64; 3], [f64; 3]) {
+        let robot = Robot::new(cfg).unwrap();
+        let kappa: [f64; 3] = std::array::from_fn(|i| {
+            robot.legs[i]
+                .map
+                .kappa(q[i] * cfg.legs[i].actuation.mm_per_step())
+        });
+        let p = robot.fk(&kappa).unwrap();
+        ([p.x, p.y, p.phi], kappa)
+    }
+
+    /// Every column is what the fits assume it is: the change of the pose when the parameter is
+    /// changed as [`Nuisance::apply`] changes it, the robot solved again (checked against
+    /// forward differences on a robot with a nonlinear map on one leg). The analysis's
+    /// linearised calibration, every candidate's fit and the joint refinement rest on it.
+    #[test]
+    fn the_columns_are_the_poses_change_as_apply_makes_it() {
+        let mut cfg = RobotConfig::nominal();
+        // The nominal maps written out, then leg 1 bending by a cubic.
+        let written = Nuisance::of(&cfg);
+        written.apply(&vec![0.0; written.n], &mut cfg);
+        let s = cfg.legs[0].tendon_map.flat_coeffs()[0];
+        cfg.legs[0].tendon_map = TendonMapSpec::from_flat(
+            MapForm::symmetric(TendonMapKind::Poly3),
+            &[1e-4, s, 0.02 * s, 1e-3 * s],
+        );
+        let nui = Nuisance::of(&cfg);
+        assert_eq!(nui.n, 3 * 4 + 4 + 2);
+        let robot = Robot::new(&cfg).unwrap();
+        let home = robot.home_motor_steps();
+        for dq in [[40.0, -30.0, 10.0], [-25.0, 35.0, -40.0]] {
+            let q: [f64; 3] = std::array::from_fn(|i| home[i] + dq[i]);
+            let (p0, kappa) = pose_at(&cfg, q);
+            let mmps: [f64; 3] = std::array::from_fn(|i| cfg.legs[i].actuation.mm_per_step());
+            let mut j_kappa = nalgebra::Matrix3::zeros();
+            let h = 1e-7;
+            for l in 0..3 {
+                let mut k = kappa;
+                k[l] += h;
+                let p = robot.fk(&k).unwrap();
+                j_kappa[(0, l)] = (p.x - p0[0]) / h;
+                j_kappa[(1, l)] = (p.y - p0[1]) / h;
+                j_kappa[(2, l)] = (p.phi - p0[2]) / h;
+            }
+            let pred = crate::model::Prediction {
+                pose: Some(p0),
+                q_eff: q,
+                dl_eff: std::array::from_fn(|i| q[i] * mmps[i]),
+                kappa,
+                j_q: nalgebra::Matrix3::zeros(),
+                j_kappa,
+            };
+            let mut cols = vec![[0.0; 3]; nui.n];
+            nui.columns(&robot, &pred, 1.0, &mut cols);
+            let flat: Vec<f64> = cfg
+                .legs
+                .iter()
+                .flat_map(|l| {
+                    let mut v = vec![1.0; GEO.len()];
+                    v.extend(l.tendon_map.flat_coeffs().iter().map(|c| c.abs().max(1e-4)));
+                    v
+                })
+                .collect();
+            for j in 0..nui.n {
+                let step = 1e-5 * flat[j];
+                let mut dx = vec![0.0; nui.n];
+                dx[j] = step;
+                let mut c = cfg.clone();
+                nui.apply(&dx, &mut c);
+                let (p1, _) = pose_at(&c, q);
+                let norm = cols[j].iter().map(|v| v * v).sum::<f64>().sqrt();
+                for a in 0..3 {
+                    let fd = (p1[a] - p0[a]) / step;
+                    assert!(
+                        (fd - cols[j][a]).abs() <= 1e-3 * norm + 1e-9,
+                        "{} at q {q:?}, coordinate {a}: column {:e}, forward difference {fd:e}",
+                        nui.names()[j],
+                        cols[j][a]
+                    );
+                }
+            }
+        }
+    }
+}
