@@ -101,6 +101,10 @@ pub struct Options {
     pub seed: u64,
     /// Fraction of targets held out by the random split.
     pub test_fraction: f64,
+    /// Fit a correction of the capture frame with the robot in the joint refinement
+    /// ([`crate::joint::JointParams::frame`]): for a model that holds a frame error, whose
+    /// registration the static poses pin better than the motion does.
+    pub frame: bool,
 }
 
 impl Default for Options {
@@ -113,6 +117,7 @@ impl Default for Options {
             phi_weight_mm_per_deg: None,
             seed: 1,
             test_fraction: 1.0 / 3.0,
+            frame: false,
         }
     }
 }
@@ -318,6 +323,9 @@ pub struct Calibration {
     /// The calibrated robot configuration.
     #[serde(skip)]
     pub robot: RobotConfig,
+    /// The capture-frame correction fitted with it ([`Options::frame`]; dx mm, dy mm, dphi
+    /// deg), when the joint result is used.
+    pub frame: Option<[f64; 3]>,
 }
 
 /// The joint refinement with the refined robot's accuracy.
@@ -476,6 +484,7 @@ pub fn calibrate_data(
                 legs: opts.parameters.step1(),
                 platform: opts.parameters.step2(),
                 forms: std::array::from_fn(|i| paper_robot.legs[i].tendon_map.form()),
+                frame: opts.frame,
             };
             let train: [Vec<LegObservation>; 3] = std::array::from_fn(|i| obs[i].0.clone());
             let joint_obs = JointObservations {
@@ -486,9 +495,9 @@ pub fn calibrate_data(
         }
     };
     let used = joint_usable(joint.as_ref(), &travel, &origin, &obs, &mut warnings);
-    let (robot, after) = match (used, &joint) {
-        (Method::Joint, Some(j)) => (j.fit.config.clone(), j.accuracy),
-        _ => (paper_robot.clone(), paper),
+    let (robot, after, frame) = match (used, &joint) {
+        (Method::Joint, Some(j)) => (j.fit.config.clone(), j.accuracy, j.fit.frame),
+        _ => (paper_robot.clone(), paper, None),
     };
     compare_with_paper(joint.as_ref(), &paper, &mut warnings);
     let diagnosis = diagnose(&robot, data);
@@ -510,7 +519,26 @@ pub fn calibrate_data(
         diagnosis,
         paper_robot,
         robot,
+        frame,
     })
+}
+
+/// The static poses with their measurements (platform pose and M_i) taken through the frame
+/// correction `f` (dx mm, dy mm, dphi deg): `R(dphi) m + d`, the orientation plus dphi.
+pub fn framed(data: &StaticData, f: [f64; 3]) -> StaticData {
+    let (s, c) = f[2].to_radians().sin_cos();
+    let tr = |m: [f64; 2]| [c * m[0] - s * m[1] + f[0], s * m[0] + c * m[1] + f[1]];
+    let mut out = data.clone();
+    for p in &mut out.poses {
+        if let Some(pose) = &mut p.settled.pose {
+            let m = tr([pose[0], pose[1]]);
+            *pose = [m[0], m[1], pose[2] + f[2]];
+        }
+        for m in p.settled.m.iter_mut().flatten() {
+            *m = tr(*m);
+        }
+    }
+    out
 }
 
 /// Training and test observations of the three legs.
@@ -898,7 +926,10 @@ fn refine_jointly(
                 ));
             }
             note_params(warnings, "joint fit", &fit.params);
-            let accuracy = split_accuracy(&fit.config, data);
+            let accuracy = match fit.frame {
+                Some(f) => split_accuracy(&fit.config, &framed(data, f)),
+                None => split_accuracy(&fit.config, data),
+            };
             Some(JointResult { fit, accuracy })
         }
         Err(e) => {

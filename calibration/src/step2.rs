@@ -23,6 +23,15 @@ pub struct Step2Params {
 }
 
 impl Step2Params {
+    /// Number of parameters it frees: r_p and theta_p per joint, and l_st per link when freed.
+    pub fn n_params(self) -> usize {
+        if self.l_st {
+            9
+        } else {
+            6
+        }
+    }
+
     /// The paper's P2 = [r_p, theta_p] per joint.
     pub const PAPER: Step2Params = Step2Params { l_st: false };
     /// P2 plus the link lengths.

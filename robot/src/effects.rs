@@ -99,6 +99,17 @@ impl FrameCorrection {
             m[2] + a,
         ]
     }
+
+    /// This correction followed by `after`: one correction that takes every measurement where
+    /// `after` takes this one's result (`R(a2) (R(a1) p + d1) + d2`).
+    pub fn then(&self, after: &FrameCorrection) -> FrameCorrection {
+        let d = after.apply([self.dx_mm, self.dy_mm, 0.0]);
+        FrameCorrection {
+            dx_mm: d[0],
+            dy_mm: d[1],
+            dphi_deg: self.dphi_deg + after.dphi_deg,
+        }
+    }
 }
 
 /// One periodic transmission error: the output of motor `motor` lags its position by
@@ -253,6 +264,27 @@ impl Effects {
 #[cfg(test)]
 mod tests {
     use crate::RobotConfig;
+
+    #[test]
+    fn two_frame_corrections_compose_into_one() {
+        let a = super::FrameCorrection {
+            dx_mm: 1.5,
+            dy_mm: -0.7,
+            dphi_deg: 2.0,
+        };
+        let b = super::FrameCorrection {
+            dx_mm: -0.4,
+            dy_mm: 0.9,
+            dphi_deg: -0.5,
+        };
+        let ab = a.then(&b);
+        for m in [[10.0, -20.0, 0.1], [-35.0, 4.0, -0.3]] {
+            let (one, two) = (ab.apply(m), b.apply(a.apply(m)));
+            for k in 0..3 {
+                assert!((one[k] - two[k]).abs() < 1e-12, "{one:?} {two:?}");
+            }
+        }
+    }
 
     #[test]
     fn effects_round_trip_and_bad_values_name_the_key() {
