@@ -102,25 +102,21 @@ pub fn recalibrated(
         frame: false,
         ..recal.options.clone()
     };
-    let held = calibrate_data(drawing, framed.as_ref().unwrap_or(&data), &opts).ok()?;
     // With a frame in the model, the frame fitted with the calibration too; kept where the
-    // static poses confirm a frame error ([`frame_confirmed`]).
-    let cal = framed
-        .as_ref()
-        .and_then(|framed| {
-            let free = calibrate_data(
-                drawing,
-                framed,
-                &CalOptions {
-                    frame: true,
-                    ..opts.clone()
-                },
-            )
-            .ok()?;
-            let none = calibrate_data(drawing, &data, &opts).ok()?;
-            frame_confirmed(&free, &none, drawing).then_some(free)
-        })
-        .unwrap_or(held);
+    // static poses confirm a frame error ([`frame_confirmed`]), else held at the model's.
+    let confirmed = framed.as_ref().and_then(|framed| {
+        let free = CalOptions {
+            frame: true,
+            ..opts.clone()
+        };
+        let free = calibrate_data(drawing, framed, &free).ok()?;
+        let none = calibrate_data(drawing, &data, &opts).ok()?;
+        frame_confirmed(&free, &none, drawing).then_some(free)
+    });
+    let cal = match confirmed {
+        Some(c) => c,
+        None => calibrate_data(drawing, framed.as_ref().unwrap_or(&data), &opts).ok()?,
+    };
     let mut out = cal.robot;
     out.name = config.name.clone();
     out.effects = config.effects.clone();
