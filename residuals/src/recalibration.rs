@@ -49,50 +49,8 @@ pub fn recalibrated(
     drawing: &RobotConfig,
     recal: &Recalibration,
 ) -> Option<RobotConfig> {
-    let series = ctx.series.get(recal.series)?;
-    let preds = ctx.preds.get(recal.series)?;
+    let data = static_data(config, ctx, recal)?;
     let frame = config.effects.frame.as_ref();
-    let mut data = recal.data.clone();
-    for p in &mut data.poses {
-        let s = &p.settled;
-        // The visit's settled rows with the command it held.
-        let rows: Vec<usize> = (s.first_row..series.samples.len())
-            .take_while(|&k| series.samples[k].settled)
-            .filter(|&k| series.samples[k].q == s.q.map(f64::from))
-            .collect();
-        if rows.is_empty() {
-            return None;
-        }
-        let mut q = [0.0; 3];
-        for (i, qi) in q.iter_mut().enumerate() {
-            let mmps = config.legs[i].actuation.mm_per_step();
-            *qi = rows
-                .iter()
-                .map(|&k| preds.get(k).map_or(f64::NAN, |x| x.dl_eff[i]))
-                .sum::<f64>()
-                / rows.len() as f64
-                / mmps;
-        }
-        if !q.iter().all(|v| v.is_finite()) {
-            return None;
-        }
-        p.q_eff = Some(q);
-        if let Some(loads) = &ctx.model.loads {
-            let d = deflection(ctx, loads, q, p.settled.pose?)?;
-            let s = &mut p.settled;
-            if let Some(pose) = &mut s.pose {
-                for k in 0..3 {
-                    pose[k] -= d.0[k];
-                }
-            }
-            for (m, dm) in s.m.iter_mut().zip(d.1) {
-                if let Some(m) = m {
-                    m[0] -= dm[0];
-                    m[1] -= dm[1];
-                }
-            }
-        }
-    }
     // The measurements as the model's capture frame corrects them.
     let framed =
         frame.map(|f| pcr_calibration::calibrate::framed(&data, [f.dx_mm, f.dy_mm, f.dphi_deg]));
@@ -134,6 +92,90 @@ pub fn recalibrated(
         f.dphi_deg += d[2];
     }
     Some(out)
+}
+
+/// The static poses as the model of `ctx` (configuration `config`) says the robot reached them:
+/// each visit's motor positions those its legs reached (`q_eff`), and under loads its
+/// measurements less the deflection the loads cause there (the capture frame not yet applied).
+fn static_data(config: &RobotConfig, ctx: &Context, recal: &Recalibration) -> Option<StaticData> {
+    let series = ctx.series.get(recal.series)?;
+    let preds = ctx.preds.get(recal.series)?;
+    let mut data = recal.data.clone();
+    for p in &mut data.poses {
+        let s = &p.settled;
+        // The visit's settled rows with the command it held.
+        let rows: Vec<usize> = (s.first_row..series.samples.len())
+            .take_while(|&k| series.samples[k].settled)
+            .filter(|&k| series.samples[k].q == s.q.map(f64::from))
+            .collect();
+        if rows.is_empty() {
+            return None;
+        }
+        let mut q = [0.0; 3];
+        for (i, qi) in q.iter_mut().enumerate() {
+            let mmps = config.legs[i].actuation.mm_per_step();
+            *qi = rows
+                .iter()
+                .map(|&k| preds.get(k).map_or(f64::NAN, |x| x.dl_eff[i]))
+                .sum::<f64>()
+                / rows.len() as f64
+                / mmps;
+        }
+        if !q.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+        p.q_eff = Some(q);
+        if let Some(loads) = &ctx.model.loads {
+            let d = deflection(ctx, loads, q, p.settled.pose?)?;
+            let s = &mut p.settled;
+            if let Some(pose) = &mut s.pose {
+                for k in 0..3 {
+                    pose[k] -= d.0[k];
+                }
+            }
+            for (m, dm) in s.m.iter_mut().zip(d.1) {
+                if let Some(m) = m {
+                    m[0] -= dm[0];
+                    m[1] -= dm[1];
+                }
+            }
+        }
+    }
+    Some(data)
+}
+
+/// Whether the static poses confirm the capture frame `config` declares
+/// ([`frame_confirmed`]): the calibration with the frame fitted from it against the calibration
+/// with no frame correction. `false` without a frame, or when a calibration fails.
+pub(crate) fn confirms_frame(
+    config: &RobotConfig,
+    ctx: &Context,
+    drawing: &RobotConfig,
+    recal: &Recalibration,
+) -> bool {
+    let Some(f) = config.effects.frame.as_ref() else {
+        return false;
+    };
+    let Some(data) = static_data(config, ctx, recal) else {
+        return false;
+    };
+    let framed = pcr_calibration::calibrate::framed(&data, [f.dx_mm, f.dy_mm, f.dphi_deg]);
+    let opts = CalOptions {
+        function: Some(config.legs[0].tendon_map.model),
+        frame: false,
+        ..recal.options.clone()
+    };
+    let free = CalOptions {
+        frame: true,
+        ..opts.clone()
+    };
+    match (
+        calibrate_data(drawing, &framed, &free),
+        calibrate_data(drawing, &data, &opts),
+    ) {
+        (Ok(free), Ok(none)) => frame_confirmed(&free, &none, drawing),
+        _ => false,
+    }
 }
 
 /// Whether the static poses confirm a capture-frame error: the calibration with the frame

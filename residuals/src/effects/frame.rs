@@ -17,6 +17,11 @@ use pcr_robot::RobotConfig;
 /// 8 mm / 3 deg is refused with it at one.
 pub const FRAME_SCALE: f64 = 1.0;
 
+/// How much farther than [`FRAME_SCALE`] a capture frame may be off where the static poses
+/// confirm it ([`crate::recalibration::confirms_frame`]): a registration error that the
+/// calibration's own poses show is a frame error whatever its size, up to this.
+pub const CONFIRMED_FRAME_SCALE: f64 = 10.0;
+
 /// The `frame` candidate.
 #[derive(Debug)]
 pub struct Frame;
