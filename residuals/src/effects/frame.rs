@@ -13,8 +13,9 @@ use pcr_robot::RobotConfig;
 
 /// How much farther than the geometry a plausible capture frame may be off
 /// ([`Effect::unphysical`]). Ten times was tried: a tendon cross-coupling of 3 % (outside the
-/// vocabulary) was then named a 1.6 deg frame error, of 15 % a 4.7 deg one; a frame error of
-/// 8 mm / 3 deg is refused with it at one.
+/// vocabulary) was then named a 1.6 deg frame error, of 15 % a 4.7 deg one. A larger frame is
+/// physical only where the static poses confirm it ([`CONFIRMED_FRAME_SCALE`]): 8 mm / 3 deg
+/// is then found, and the cross-coupling's are not confirmed.
 pub const FRAME_SCALE: f64 = 1.0;
 
 /// How much farther than [`FRAME_SCALE`] a capture frame may be off where the static poses
@@ -154,7 +155,8 @@ impl Effect for Frame {
 
     /// A registration off by more than `max_change` mm or a third of it in degrees would be
     /// seen at once (1 deg is 5 mm at the base points), and larger rotations are what a
-    /// coupling of the legs imitates ([`FRAME_SCALE`]).
+    /// coupling of the legs imitates ([`FRAME_SCALE`]); the search lets a larger one through
+    /// where the static poses confirm it ([`CONFIRMED_FRAME_SCALE`]).
     fn unphysical(&self, effects: &Effects, max_change: f64) -> Option<String> {
         let f = effects.frame.as_ref()?;
         let (mm, deg) = (FRAME_SCALE * max_change, FRAME_SCALE * max_change / 3.0);
