@@ -456,7 +456,7 @@ mod tests {
     fn the_frame_is_fitted_with_the_robot() {
         let truth = truth();
         let (mut legs, mut poses) = observations(&truth);
-        let c = [1.5, -0.8, 0.6];
+        let c: [f64; 3] = [1.5, -0.8, 0.6];
         let (s, co) = (-c[2]).to_radians().sin_cos();
         let into = |m: [f64; 2]| {
             let (x, y) = (m[0] - c[0], m[1] - c[1]);

@@ -48,6 +48,7 @@ fn refine_from(
         legs: FreeGeometry::PAPER,
         platform: Step2Params::PAPER,
         forms: std::array::from_fn(|i| cal.paper_robot.legs[i].tendon_map.form()),
+        frame: false,
     };
     refine(start, from, free, obs, cal.step2.phi_weight_mm_per_deg).unwrap()
 }
