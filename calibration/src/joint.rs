@@ -398,6 +398,22 @@ mod tests {
         (legs, poses)
     }
 
+    /// `truth` off in every leg's angle, length and map slope (as a two-step result would be),
+    /// and in its platform joints when `platform`.
+    fn off(truth: &RobotConfig, platform: bool) -> RobotConfig {
+        let mut start = truth.clone();
+        for l in &mut start.legs {
+            l.psi_deg -= 0.2;
+            l.l_c_mm += 0.3;
+            if platform {
+                l.r_p_mm -= 0.2;
+                l.theta_p_deg += 0.2;
+            }
+            l.tendon_map.coeffs[1] *= 1.02;
+        }
+        start
+    }
+
     fn paper_affine() -> JointParams {
         JointParams {
             legs: FreeGeometry::PAPER,
@@ -412,14 +428,7 @@ mod tests {
         let truth = truth();
         let (legs, poses) = observations(&truth);
         // Start off the truth in every parameter (as a two-step result would be).
-        let mut start = truth.clone();
-        for l in &mut start.legs {
-            l.psi_deg -= 0.2;
-            l.l_c_mm += 0.3;
-            l.r_p_mm -= 0.2;
-            l.theta_p_deg += 0.2;
-            l.tendon_map.coeffs[1] *= 1.02;
-        }
+        let start = off(&truth, true);
         let obs = JointObservations {
             legs: &legs,
             poses: &poses,
@@ -469,12 +478,7 @@ mod tests {
             let m = into([p.pose[0], p.pose[1]]);
             p.pose = [m[0], m[1], p.pose[2] - c[2]];
         }
-        let mut start = truth.clone();
-        for l in &mut start.legs {
-            l.psi_deg -= 0.2;
-            l.l_c_mm += 0.3;
-            l.tendon_map.coeffs[1] *= 1.02;
-        }
+        let start = off(&truth, false);
         let obs = JointObservations {
             legs: &legs,
             poses: &poses,
