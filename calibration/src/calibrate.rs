@@ -19,6 +19,7 @@ use crate::step1::{self, FreeGeometry, LegFit, LegObservation, Step1Error};
 use crate::step2::{self, PoseErrors, PoseObservation, Step2Error, Step2Fit, Step2Params};
 use pcr_kinematics::Robot;
 use pcr_recording::{Recording, Split};
+use pcr_robot::effects::FrameCorrection;
 use pcr_robot::{MapForm, MapReading, RobotConfig, TendonMapKind};
 use serde::Serialize;
 
@@ -323,9 +324,9 @@ pub struct Calibration {
     /// The calibrated robot configuration.
     #[serde(skip)]
     pub robot: RobotConfig,
-    /// The capture-frame correction fitted with it ([`Options::frame`]; dx mm, dy mm, dphi
-    /// deg), when the joint result is used.
-    pub frame: Option<[f64; 3]>,
+    /// The capture-frame correction fitted with it ([`Options::frame`]), when the joint result
+    /// is used.
+    pub frame: Option<FrameCorrection>,
 }
 
 /// The joint refinement with the refined robot's accuracy.
@@ -496,7 +497,7 @@ pub fn calibrate_data(
     };
     let used = joint_usable(joint.as_ref(), &travel, &origin, &obs, &mut warnings);
     let (robot, after, frame) = match (used, &joint) {
-        (Method::Joint, Some(j)) => (j.fit.config.clone(), j.accuracy, j.fit.frame),
+        (Method::Joint, Some(j)) => (j.fit.config.clone(), j.accuracy, j.fit.frame.clone()),
         _ => (paper_robot.clone(), paper, None),
     };
     compare_with_paper(joint.as_ref(), &paper, &mut warnings);
@@ -524,18 +525,17 @@ pub fn calibrate_data(
 }
 
 /// The static poses with their measurements (platform pose and M_i) taken through the frame
-/// correction `f` (dx mm, dy mm, dphi deg): `R(dphi) m + d`, the orientation plus dphi.
-pub fn framed(data: &StaticData, f: [f64; 3]) -> StaticData {
-    let (s, c) = f[2].to_radians().sin_cos();
-    let tr = |m: [f64; 2]| [c * m[0] - s * m[1] + f[0], s * m[0] + c * m[1] + f[1]];
+/// correction `f`.
+pub fn framed(data: &StaticData, f: &FrameCorrection) -> StaticData {
     let mut out = data.clone();
     for p in &mut out.poses {
         if let Some(pose) = &mut p.settled.pose {
-            let m = tr([pose[0], pose[1]]);
-            *pose = [m[0], m[1], pose[2] + f[2]];
+            let c = f.apply([pose[0], pose[1], pose[2].to_radians()]);
+            *pose = [c[0], c[1], c[2].to_degrees()];
         }
         for m in p.settled.m.iter_mut().flatten() {
-            *m = tr(*m);
+            let c = f.apply([m[0], m[1], 0.0]);
+            *m = [c[0], c[1]];
         }
     }
     out
@@ -926,7 +926,7 @@ fn refine_jointly(
                 ));
             }
             note_params(warnings, "joint fit", &fit.params);
-            let accuracy = match fit.frame {
+            let accuracy = match &fit.frame {
                 Some(f) => split_accuracy(&fit.config, &framed(data, f)),
                 None => split_accuracy(&fit.config, data),
             };

@@ -19,6 +19,7 @@ use crate::params::ParamBox;
 use crate::step1::{self, coeff_unit, describe, Correlated, FreeGeometry, LegObservation, Param};
 use crate::step2::{self, PoseObservation, Step2Params};
 use pcr_kinematics::{Leg, Robot};
+use pcr_robot::effects::FrameCorrection;
 use pcr_robot::{MapForm, RobotConfig};
 use serde::Serialize;
 use std::ops::Range;
@@ -72,9 +73,8 @@ pub struct JointFit {
     pub converged: bool,
     /// Solver status word.
     pub status: String,
-    /// The capture-frame correction fitted with the robot (dx mm, dy mm, dphi deg), when
-    /// [`JointParams::frame`] freed it.
-    pub frame: Option<[f64; 3]>,
+    /// The capture-frame correction fitted with the robot, when [`JointParams::frame`] freed it.
+    pub frame: Option<FrameCorrection>,
     /// Residual evaluations.
     pub evaluations: usize,
 }
@@ -137,14 +137,14 @@ impl Layout {
         self.starts[3] + self.free.platform.n_params()
     }
 
-    /// The frame correction of `x` (zero when it is not freed).
-    fn frame(&self, x: &[f64]) -> [f64; 3] {
-        if self.free.frame {
-            let f = self.frame_start();
-            [x[f], x[f + 1], x[f + 2]]
-        } else {
-            [0.0; 3]
-        }
+    /// The frame correction of `x`, when freed.
+    fn frame(&self, x: &[f64]) -> Option<FrameCorrection> {
+        let f = self.frame_start();
+        self.free.frame.then(|| FrameCorrection {
+            dx_mm: x[f],
+            dy_mm: x[f + 1],
+            dphi_deg: x[f + 2],
+        })
     }
 
     /// `base` with the parameters of `x`.
@@ -219,12 +219,6 @@ fn leg_box(
 /// Largest frame correction the joint fit moves to, mm or deg: far beyond a registration error.
 const FRAME_BOUND: f64 = 50.0;
 
-/// A point (mm) through the frame correction `f` (dx, dy mm, dphi deg): `R(dphi) m + d`.
-fn framed(f: [f64; 3], m: [f64; 2]) -> [f64; 2] {
-    let (s, c) = f[2].to_radians().sin_cos();
-    [c * m[0] - s * m[1] + f[0], s * m[0] + c * m[1] + f[1]]
-}
-
 struct JointProblem<'a> {
     layout: Layout,
     base: &'a RobotConfig,
@@ -245,46 +239,53 @@ impl Problem for JointProblem<'_> {
 
     fn residuals(&mut self, x: &[f64], r: &mut [f64]) -> Result<(), String> {
         let cfg = self.layout.robot(self.base, x);
-        if !self.layout.free.frame {
-            let mut at = 0;
-            for (leg, obs) in cfg.legs.iter().zip(self.obs.legs) {
-                let n = 2 * obs.len();
-                step1::m_residuals(&Leg::from_config(leg), obs, &mut r[at..at + n]);
-                at += n;
-            }
-            let robot = Robot::new(&cfg).map_err(|e| e.to_string())?;
-            return step2::pose_residuals(&robot, self.obs.poses, self.w, &mut r[at..]);
-        }
-        // The observations through the frame correction.
-        let f = self.layout.frame(x);
+        // The observations through the frame correction, when it is freed.
+        let framed = self.layout.frame(x).map(|f| framed(&f, self.obs));
+        let (legs, poses) = match &framed {
+            Some((l, p)) => (l, p.as_slice()),
+            None => (self.obs.legs, self.obs.poses),
+        };
         let mut at = 0;
-        for (leg, obs) in cfg.legs.iter().zip(self.obs.legs) {
+        for (leg, obs) in cfg.legs.iter().zip(legs) {
             let n = 2 * obs.len();
-            let moved: Vec<LegObservation> = obs
-                .iter()
-                .map(|o| LegObservation {
-                    dl_mm: o.dl_mm,
-                    m: framed(f, o.m),
-                })
-                .collect();
-            step1::m_residuals(&Leg::from_config(leg), &moved, &mut r[at..at + n]);
+            step1::m_residuals(&Leg::from_config(leg), obs, &mut r[at..at + n]);
             at += n;
         }
-        let poses: Vec<PoseObservation> = self
-            .obs
-            .poses
-            .iter()
-            .map(|p| {
-                let m = framed(f, [p.pose[0], p.pose[1]]);
-                PoseObservation {
-                    q: p.q,
-                    pose: [m[0], m[1], p.pose[2] + f[2]],
-                }
-            })
-            .collect();
         let robot = Robot::new(&cfg).map_err(|e| e.to_string())?;
-        step2::pose_residuals(&robot, &poses, self.w, &mut r[at..])
+        step2::pose_residuals(&robot, poses, self.w, &mut r[at..])
     }
+}
+
+/// The observations `obs` (M_i and platform poses) through the frame correction `f`.
+fn framed(
+    f: &FrameCorrection,
+    obs: JointObservations<'_>,
+) -> ([Vec<LegObservation>; 3], Vec<PoseObservation>) {
+    let point = |m: [f64; 2]| {
+        let c = f.apply([m[0], m[1], 0.0]);
+        [c[0], c[1]]
+    };
+    let legs = std::array::from_fn(|i| {
+        obs.legs[i]
+            .iter()
+            .map(|o| LegObservation {
+                dl_mm: o.dl_mm,
+                m: point(o.m),
+            })
+            .collect()
+    });
+    let poses = obs
+        .poses
+        .iter()
+        .map(|p| {
+            let c = f.apply([p.pose[0], p.pose[1], p.pose[2].to_radians()]);
+            PoseObservation {
+                q: p.q,
+                pose: [c[0], c[1], c[2].to_degrees()],
+            }
+        })
+        .collect();
+    (legs, poses)
 }
 
 fn rms(r: &[f64]) -> f64 {
@@ -343,7 +344,7 @@ pub fn refine(
         converged: fit.status.converged(),
         status: format!("{:?}", fit.status).to_lowercase(),
         evaluations: fit.evaluations,
-        frame: free.frame.then(|| layout.frame(&fit.x)),
+        frame: layout.frame(&fit.x),
     })
 }
 
@@ -490,7 +491,7 @@ mod tests {
         let fit = refine(&RobotConfig::nominal(), &start, free, obs, 1.0).unwrap();
         assert!(fit.converged && fit.rms_mm < 1e-6, "{fit:?}");
         let f = fit.frame.unwrap();
-        for (a, b) in f.iter().zip(c) {
+        for (a, b) in [f.dx_mm, f.dy_mm, f.dphi_deg].iter().zip(c) {
             assert!((a - b).abs() < 1e-5, "{f:?} against {c:?}");
         }
         assert_eq!(fit.params.len(), 3 * 4 + 6 + 3);

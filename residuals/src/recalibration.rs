@@ -24,7 +24,6 @@
 use crate::context::Context;
 use pcr_calibration::calibrate::{calibrate_data, Options as CalOptions};
 use pcr_calibration::StaticData;
-use pcr_robot::effects::FrameCorrection;
 use pcr_robot::RobotConfig;
 
 /// The static poses the analysis's first calibration was made from, so that it can be made
@@ -50,28 +49,19 @@ pub fn recalibrated(
     recal: &Recalibration,
 ) -> Option<RobotConfig> {
     let data = static_data(config, ctx, recal)?;
-    let frame = config.effects.frame.as_ref();
+    let opts = options(config, recal);
     // The measurements as the model's capture frame corrects them.
-    let framed =
-        frame.map(|f| pcr_calibration::calibrate::framed(&data, [f.dx_mm, f.dy_mm, f.dphi_deg]));
-    let function = config.legs[0].tendon_map.model;
-    let opts = CalOptions {
-        function: Some(function),
-        frame: false,
-        ..recal.options.clone()
-    };
+    let framed = config
+        .effects
+        .frame
+        .as_ref()
+        .map(|f| pcr_calibration::calibrate::framed(&data, f));
     // With a frame in the model, the frame fitted with the calibration too; kept where the
     // static poses confirm a frame error ([`frame_confirmed`]), else held at the model's.
-    let confirmed = framed.as_ref().and_then(|framed| {
-        let free = CalOptions {
-            frame: true,
-            ..opts.clone()
-        };
-        let free = calibrate_data(drawing, framed, &free).ok()?;
-        let none = calibrate_data(drawing, &data, &opts).ok()?;
-        frame_confirmed(&free, &none, drawing).then_some(free)
-    });
-    let cal = match confirmed {
+    let cal = match framed
+        .as_ref()
+        .and_then(|framed| with_frame(&data, framed, drawing, &opts))
+    {
         Some(c) => c,
         None => calibrate_data(drawing, framed.as_ref().unwrap_or(&data), &opts).ok()?,
     };
@@ -80,18 +70,38 @@ pub fn recalibrated(
     out.effects = config.effects.clone();
     // The frame fitted with the robot, on the measurements already corrected by the model's:
     // the two corrections composed.
-    if let (Some(f), Some(d)) = (out.effects.frame.as_mut(), cal.frame) {
-        let c = FrameCorrection {
-            dx_mm: d[0],
-            dy_mm: d[1],
-            dphi_deg: d[2],
-        }
-        .apply([f.dx_mm, f.dy_mm, 0.0]);
-        f.dx_mm = c[0];
-        f.dy_mm = c[1];
-        f.dphi_deg += d[2];
+    if let (Some(f), Some(d)) = (out.effects.frame.as_mut(), &cal.frame) {
+        *f = f.then(d);
     }
     Some(out)
+}
+
+/// The calibration's settings for the model `config`: the first calibration's, with the map
+/// function the model holds, the frame held.
+fn options(config: &RobotConfig, recal: &Recalibration) -> CalOptions {
+    CalOptions {
+        function: Some(config.legs[0].tendon_map.model),
+        frame: false,
+        ..recal.options.clone()
+    }
+}
+
+/// The calibration with a capture frame fitted from the measurements `framed` (the static poses
+/// `data` as the model's frame corrects them), where the static poses confirm a frame error
+/// ([`frame_confirmed`], against the calibration of `data` with no frame correction).
+fn with_frame(
+    data: &StaticData,
+    framed: &StaticData,
+    drawing: &RobotConfig,
+    opts: &CalOptions,
+) -> Option<pcr_calibration::calibrate::Calibration> {
+    let free = CalOptions {
+        frame: true,
+        ..opts.clone()
+    };
+    let free = calibrate_data(drawing, framed, &free).ok()?;
+    let none = calibrate_data(drawing, data, opts).ok()?;
+    frame_confirmed(&free, &none, drawing).then_some(free)
 }
 
 /// The static poses as the model of `ctx` (configuration `config`) says the robot reached them:
@@ -153,29 +163,14 @@ pub(crate) fn confirms_frame(
     drawing: &RobotConfig,
     recal: &Recalibration,
 ) -> bool {
-    let Some(f) = config.effects.frame.as_ref() else {
+    let (Some(f), Some(data)) = (
+        config.effects.frame.as_ref(),
+        static_data(config, ctx, recal),
+    ) else {
         return false;
     };
-    let Some(data) = static_data(config, ctx, recal) else {
-        return false;
-    };
-    let framed = pcr_calibration::calibrate::framed(&data, [f.dx_mm, f.dy_mm, f.dphi_deg]);
-    let opts = CalOptions {
-        function: Some(config.legs[0].tendon_map.model),
-        frame: false,
-        ..recal.options.clone()
-    };
-    let free = CalOptions {
-        frame: true,
-        ..opts.clone()
-    };
-    match (
-        calibrate_data(drawing, &framed, &free),
-        calibrate_data(drawing, &data, &opts),
-    ) {
-        (Ok(free), Ok(none)) => frame_confirmed(&free, &none, drawing),
-        _ => false,
-    }
+    let framed = pcr_calibration::calibrate::framed(&data, f);
+    with_frame(&data, &framed, drawing, &options(config, recal)).is_some()
 }
 
 /// Whether the static poses confirm a capture-frame error: the calibration with the frame
