@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Per-effect benchmark of `pcr residuals` (issue 19; BENCHMARKS.md "Residual analysis per effect").
+# Per-effect benchmark of `pcr residuals` (BENCHMARKS.md "Residual analysis per effect").
 #
 # For each effect of the plant (and clean data) it derives a plant file from
 # configs/plant-ideal.toml (capture noise on, one effect on), records a calibration recording

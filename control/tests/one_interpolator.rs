@@ -1,4 +1,4 @@
-//! One interpolator (team issue 13, item 1): the poses `pcr plan` plans for a program
+//! One interpolator: the poses `pcr plan` plans for a program
 //! ([`pcr_control::plan_moves`], the chain's `InterpolatorStep` over `PlannerSource` on a
 //! simulated clock) are the planned poses the running chain records for the same program on the
 //! ideal drive (the `planned` pose of each driver-state row: the recording's `xp_mm, yp_mm,

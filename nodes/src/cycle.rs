@@ -4,7 +4,7 @@
 //! listener, [`crate::hop::wait`], which has drained the event; the mocap on its WaitSet): take
 //! the newest input, run the step, publish zero-copy ([`publish`]) and notify.
 
-use crate::hop::HopService;
+use crate::hop_service::HopService;
 use crate::ports::{latest, publish};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;

@@ -10,6 +10,7 @@
 pub mod args;
 pub mod cycle;
 pub mod hop;
+pub mod hop_service;
 pub mod ports;
 pub mod protocol;
 pub mod realtime;

@@ -1,7 +1,7 @@
 //! The iceoryx2 node of a process and its ports. Service settings live here only, so that every
 //! process (and the supervisor) opens each service with the same settings.
 
-use crate::hop::HopService;
+use crate::hop_service::{HopService, MAX_EVENT_ID, SAMPLE};
 use anyhow::{anyhow, Context, Result};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
@@ -192,7 +192,7 @@ impl ChainNode {
             .max_notifiers(MAX_PORTS)
             .max_listeners(MAX_PORTS)
             .max_nodes(MAX_NODES)
-            .event_id_max_value(crate::hop::MAX_EVENT_ID)
+            .event_id_max_value(MAX_EVENT_ID)
             .open_or_create()
             .map_err(|e| anyhow!("cannot open hop event service {base}: {e:?}"))
     }
@@ -201,7 +201,7 @@ impl ChainNode {
     pub fn hop_notifier(&self, base: &str) -> Result<Notifier<HopService>> {
         self.hop_event(base)?
             .notifier_builder()
-            .default_event_id(crate::hop::SAMPLE)
+            .default_event_id(SAMPLE)
             .create()
             .map_err(|e| anyhow!("cannot create notifier on {base}: {e:?}"))
     }

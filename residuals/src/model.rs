@@ -484,7 +484,7 @@ impl ExtendedModel {
         [
             m[0] - predicted[0],
             m[1] - predicted[1],
-            w_phi * crate::context::wrap(m[2] - predicted[2]),
+            w_phi * pcr_robot::geometry::wrap_angle(m[2] - predicted[2]),
         ]
     }
 

@@ -10,13 +10,13 @@
 //! them where they suited it alone, and a later effect could otherwise only be fitted around
 //! that.
 
-use crate::context::wrap;
 use crate::effects::{self, Parameter};
 use crate::model::{ExtendedModel, Sensitivity};
 use crate::nuisance::Nuisance;
 use crate::series::{Blocks, Series};
 use pcr_calibration::lsq::{self, Options, Problem};
 use pcr_robot::effects::Effects;
+use pcr_robot::geometry::wrap_angle as wrap;
 use pcr_robot::RobotConfig;
 use rayon::prelude::*;
 

@@ -161,7 +161,7 @@ fn prototype() -> &'static Case {
     CASE.get_or_init(|| case(1.0, true))
 }
 
-/// The acceptance of issue 17, item 4: held-out row RMS within 1.15 times the floor, and the
+/// The joint calibration's acceptance: held-out row RMS within 1.15 times the floor, and the
 /// joint result no worse than the paper's two steps on the same rows (beyond two standard
 /// errors of their paired difference: here the two differ by less than the sampling error).
 #[test]
