@@ -16,6 +16,11 @@ pub(crate) const GN_STEPS: usize = 10;
 /// error (gains less than 3 %).
 const GN_MIN_GAIN: f64 = 0.97;
 
+/// The acceptance's steps run on every so many training rows (of each series): the joint
+/// refinement that follows runs on fewer ([`crate::refine::SEARCH_ROWS`]), and the steps only
+/// take the parameters near it (rows 20 ms apart at 50 Hz: four of them 80 ms apart).
+const ACCEPTANCE_EVERY: usize = 4;
+
 /// Puts an accepted candidate into the model for real: the linearised change, damped until the
 /// full model lowers the training error, re-linearised and refitted (Gauss-Newton) while that
 /// helps, then every effect's parameters refined together on the full model. `None` when the
@@ -30,9 +35,11 @@ pub(crate) fn accept<'a>(
     progress: &crate::progress::ProgressSink,
 ) -> Option<(RobotConfig, Context<'a>)> {
     let effect = effects::named(first.name);
-    // The steps compare training errors: their contexts hold the training rows alone.
-    let n_train = ctx.train().len();
-    let start_sse = ctx.sse(&ctx.train(), None);
+    // The steps compare training errors: their contexts hold every `ACCEPTANCE_EVERY`-th
+    // training row alone.
+    let start = ctx.training_subset(ACCEPTANCE_EVERY);
+    let n_train = start.rows.len();
+    let start_sse = start.sse(&start.train(), None);
     let mut cur: Option<(RobotConfig, Context<'a>, f64)> = None;
     let mut step = Some(first);
     // Damping carried from one step to the next (a step that needed 1/4 starts the next at 1/2).
@@ -53,7 +60,7 @@ pub(crate) fn accept<'a>(
                 .validate("extended robot")
                 .ok()
                 .and_then(|_| ExtendedModel::like(&cand, &ctx.model).ok())
-                .map(|m| Context::training(series, m, blocks, w_phi))
+                .map(|m| Context::training(series, m, blocks, w_phi, ACCEPTANCE_EVERY))
                 .filter(|n| n.rows.len() + 5 >= n_train);
             if let Some(nctx) = nctx {
                 let sse = nctx.sse(&nctx.train(), None);
@@ -104,7 +111,9 @@ pub(crate) fn accept<'a>(
     if refined != cfg {
         if let Ok(model) = ExtendedModel::like(&refined, &ctx.model) {
             let rctx = Context::new(series, model, blocks, w_phi);
-            if rctx.rows.len() + 5 >= ctx.rows.len() && rctx.sse(&rctx.train(), None) < sse {
+            if rctx.rows.len() + 5 >= ctx.rows.len()
+                && rctx.training_subset_sse(ACCEPTANCE_EVERY) < sse
+            {
                 return Some((refined, rctx));
             }
         }

@@ -26,6 +26,13 @@ pub struct RowRef {
     pub r: [f64; 3],
 }
 
+impl RowRef {
+    /// A training row whose index is a multiple of `every` (of [`Context::training`]'s rows).
+    pub fn in_training_subset(&self, every: usize) -> bool {
+        !self.held_out && self.k.is_multiple_of(every.max(1))
+    }
+}
+
 /// The residuals of one model.
 #[derive(Debug, Clone)]
 pub struct Context<'a> {
@@ -59,18 +66,51 @@ pub const MAX_RESPONSE_ERROR: f64 = 0.005;
 impl<'a> Context<'a> {
     /// Predicts every series with `model` and collects the residuals.
     pub fn new(series: &'a [Series], model: ExtendedModel, blocks: &Blocks, w_phi: f64) -> Self {
-        Self::of_rows(series, model, blocks, w_phi, true)
+        Self::of_rows(series, model, blocks, w_phi, &|_, _| true)
     }
 
-    /// [`Context::new`] on the training rows alone: the held-out rows are neither predicted nor
-    /// listed. For the steps of a search that compare training errors only.
+    /// [`Context::new`] on every `every`-th training row of each series alone (row index a
+    /// multiple of `every`): the other rows are neither predicted nor listed. For the steps of
+    /// a search that compare training errors only.
     pub fn training(
         series: &'a [Series],
         model: ExtendedModel,
         blocks: &Blocks,
         w_phi: f64,
+        every: usize,
     ) -> Self {
-        Self::of_rows(series, model, blocks, w_phi, false)
+        Self::of_rows(series, model, blocks, w_phi, &|si, k| {
+            k.is_multiple_of(every.max(1)) && !blocks.held_out[blocks.block[si][k]]
+        })
+    }
+
+    /// The sum of squared residuals over the rows [`Context::training_subset`] keeps.
+    pub fn training_subset_sse(&self, every: usize) -> f64 {
+        self.rows
+            .iter()
+            .filter(|r| r.in_training_subset(every))
+            .map(|r| r.r[0].powi(2) + r.r[1].powi(2) + r.r[2].powi(2))
+            .sum()
+    }
+
+    /// This context's rows that [`Context::training`] with `every` keeps, with their
+    /// predictions (none solved again).
+    pub fn training_subset(&self, every: usize) -> Context<'a> {
+        Context {
+            series: self.series,
+            model: self.model.clone(),
+            preds: self.preds.clone(),
+            rows: self
+                .rows
+                .iter()
+                .filter(|r| r.in_training_subset(every))
+                .copied()
+                .collect(),
+            w_phi: self.w_phi,
+            unpredicted: self.unpredicted,
+            nuisance: std::sync::OnceLock::new(),
+            loads: std::sync::OnceLock::new(),
+        }
     }
 
     /// The rows of this context predicted by another model, in the same order with the same
@@ -119,9 +159,8 @@ impl<'a> Context<'a> {
         model: ExtendedModel,
         blocks: &Blocks,
         w_phi: f64,
-        held_out_too: bool,
+        wanted: &(dyn Fn(usize, usize) -> bool + Sync),
     ) -> Self {
-        let wanted = |si: usize, k: usize| held_out_too || !blocks.held_out[blocks.block[si][k]];
         let started = std::time::Instant::now();
         let preds: Vec<Vec<Prediction>> = series
             .iter()
@@ -152,7 +191,7 @@ impl<'a> Context<'a> {
         }
         tracing::debug!(
             rows = rows.len(),
-            held_out_too,
+            held_out_too = rows.iter().any(|r| r.held_out),
             loaded = model.loads.is_some(),
             seconds = started.elapsed().as_secs_f64(),
             "context predicted"
@@ -518,17 +557,6 @@ impl<'a> Context<'a> {
     }
 }
 
-/// Wraps an angle to (-pi, pi].
-pub fn wrap(a: f64) -> f64 {
-    let t = std::f64::consts::TAU;
-    let w = a.rem_euclid(t);
-    if w > std::f64::consts::PI {
-        w - t
-    } else {
-        w
-    }
-}
-
 /// Errors of a model on a set of rows: the figures of `before` / `after`.
 #[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize)]
 pub struct Errors {
@@ -568,5 +596,62 @@ impl Errors {
         e.position_rms_mm = (s2 / n).sqrt();
         e.orientation_rms_deg = (o2 / n).sqrt();
         e
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use pcr_robot::RobotConfig;
+
+    /// The acceptance compares the training error of a context made on every fourth training
+    /// row ([`Context::training`]) with that of a full context cut down to the same rows
+    /// ([`Context::training_subset`], [`Context::training_subset_sse`]): both must hold the same
+    /// rows with the same residuals, and no held-out row.
+    #[test]
+    fn a_training_context_on_every_fourth_row_is_the_full_context_cut_down() {
+        let cfg = RobotConfig::nominal();
+        let robot = pcr_kinematics::Robot::new(&cfg).unwrap();
+        let home = robot.home_motor_steps();
+        let mut rec = pcr_recording::Recording::default();
+        for k in 0..403 {
+            let t = k as f64 * 0.02;
+            let q: [i32; 3] = std::array::from_fn(|i| {
+                (home[i] + 60.0 * (0.7 * t + i as f64).sin()).round() as i32
+            });
+            let mut r = pcr_recording::Row::new(t, q);
+            // Measured poses a little off the model's, so that every residual differs.
+            r.pose = [
+                Some(0.1 * (3.0 * t).sin()),
+                Some(0.05 * t),
+                Some(0.001 * (5.0 * t).cos()),
+            ];
+            rec.rows.push(r);
+        }
+        let series = vec![Series::from_recording(&rec, "t").unwrap()];
+        let blocks = Blocks::in_time(&series, 1.0, 3);
+        assert!(blocks.held_out.iter().any(|&h| h));
+        let model = ExtendedModel::new(&cfg, crate::effects::chain()).unwrap();
+        let full = Context::new(&series, model.clone(), &blocks, 50.0);
+        let thin = Context::training(&series, model, &blocks, 50.0, 4);
+        let cut = full.training_subset(4);
+        assert!(!thin.rows.is_empty() && thin.rows.len() < full.train().len() / 3);
+        // The same rows; the residuals to the forward kinematics' tolerance (each solve is
+        // started from the row solved before it, which differs).
+        assert_eq!(thin.rows.len(), cut.rows.len());
+        for (a, b) in thin.rows.iter().zip(&cut.rows) {
+            assert_eq!(
+                (a.s, a.k, a.block, a.held_out),
+                (b.s, b.k, b.block, b.held_out)
+            );
+            assert!(!a.held_out && a.k % 4 == 0);
+            for c in 0..3 {
+                assert!((a.r[c] - b.r[c]).abs() < 1e-9, "{a:?} {b:?}");
+            }
+        }
+        let sse = thin.sse(&thin.train(), None);
+        assert!(sse > 0.0);
+        assert!((full.training_subset_sse(4) - sse).abs() < 1e-9 * sse);
+        assert_eq!(cut.sse(&cut.train(), None), full.training_subset_sse(4));
     }
 }
