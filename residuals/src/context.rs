@@ -29,8 +29,13 @@ pub struct RowRef {
 impl RowRef {
     /// A training row whose index is a multiple of `every` (of [`Context::training`]'s rows).
     pub fn in_training_subset(&self, every: usize) -> bool {
-        !self.held_out && self.k.is_multiple_of(every.max(1))
+        in_training_subset(self.held_out, self.k, every)
     }
+}
+
+/// Whether row `k` (held out or not) is one of every `every` training rows.
+fn in_training_subset(held_out: bool, k: usize, every: usize) -> bool {
+    !held_out && k.is_multiple_of(every.max(1))
 }
 
 /// The residuals of one model.
@@ -80,17 +85,16 @@ impl<'a> Context<'a> {
         every: usize,
     ) -> Self {
         Self::of_rows(series, model, blocks, w_phi, &|si, k| {
-            k.is_multiple_of(every.max(1)) && !blocks.held_out[blocks.block[si][k]]
+            in_training_subset(blocks.held_out[blocks.block[si][k]], k, every)
         })
     }
 
     /// The sum of squared residuals over the rows [`Context::training_subset`] keeps.
     pub fn training_subset_sse(&self, every: usize) -> f64 {
-        self.rows
-            .iter()
-            .filter(|r| r.in_training_subset(every))
-            .map(|r| r.r[0].powi(2) + r.r[1].powi(2) + r.r[2].powi(2))
-            .sum()
+        let idx: Vec<usize> = (0..self.rows.len())
+            .filter(|&i| self.rows[i].in_training_subset(every))
+            .collect();
+        self.sse(&idx, None)
     }
 
     /// This context's rows that [`Context::training`] with `every` keeps, with their
