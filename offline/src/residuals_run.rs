@@ -58,7 +58,7 @@ pub struct Prepared {
     pub blocks: Blocks,
     /// The static poses of the calibration done first, for the analysis to make it again from
     /// the drawing with its effects in the model (`Options::recalibration`).
-    pub recalibration: Option<std::sync::Arc<pcr_residuals::recalibration::Recalibration>>,
+    pub recalibration: Option<std::sync::Arc<pcr_residuals::options::Recalibration>>,
 }
 
 /// Reads the series of `data` and `holdout`, calibrates `start` on the static poses of the
@@ -107,13 +107,11 @@ pub fn prepare(
                 ));
                 let robot = cal.robot.clone();
                 calibration = Some((s.origin.clone(), cal));
-                recalibration = Some(std::sync::Arc::new(
-                    pcr_residuals::recalibration::Recalibration {
-                        data: sd,
-                        series: index,
-                        options: CalOptions::default(),
-                    },
-                ));
+                recalibration = Some(std::sync::Arc::new(pcr_residuals::options::Recalibration {
+                    data: sd,
+                    series: index,
+                    options: CalOptions::default(),
+                }));
                 robot
             }
             None => {

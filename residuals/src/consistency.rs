@@ -19,25 +19,8 @@
 //! than a third, an imitation's by far more).
 
 use crate::context::Context;
-use crate::effects::Effect;
+use crate::effects::{Effect, Parts};
 use crate::fitted::{significant, Estimate};
-
-/// Which independent parts of the training rows a candidate's parameters are compared on.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Parts {
-    /// Settled (static) rows against moving rows.
-    StaticMoving,
-    /// One recording against the others, or the first against the second half of the training
-    /// time when there is one recording.
-    Halves,
-    /// Static against moving rows, and then, for each leg, the rows where it bends less than
-    /// its median against those where it bends more: a load or a stiffness is the same over
-    /// the whole workspace, while an imitation of a cause that depends on the configuration
-    /// (a tendon pulling on another leg's) is not.
-    Workspace,
-    /// Leg i's bending below its median over the rows against above it.
-    Bending(usize),
-}
 
 /// Fewest training rows a part needs for the check (fewer: not checked).
 pub const MIN_ROWS: usize = 400;

@@ -75,11 +75,6 @@ pub fn solve_with_prior(
     finish(blocks, rr, n, idx.len(), prior)
 }
 
-/// The per-block normal equations' product of the nuisance's columns with themselves
-/// (`G_b^T G_b`, symmetric, in block order) over the rows `idx`: the part of a joint fit every
-/// candidate of a round shares, computed once per context and set of rows.
-pub type NuisanceGram = Vec<(usize, DMatrix<f64>)>;
-
 /// [`solve_with_prior`] of a joint fit: `n_e` columns of the effect (`effect`), then the
 /// nuisance's columns of `table`, whose products with themselves come from the table's cache.
 /// The same solution and errors, for a third of the arithmetic per row when the effect has a
@@ -97,7 +92,7 @@ pub fn solve_joint(
     if n == 0 || idx.is_empty() {
         return None;
     }
-    let gram = table.gram(ctx, idx);
+    let gram = table.gram(&|i| ctx.rows[i].block, idx);
     let nb = idx
         .iter()
         .map(|&i| ctx.rows[i].block + 1)

@@ -272,6 +272,11 @@ impl Nuisance {
     }
 }
 
+/// The per-block normal equations' product of the nuisance's columns with themselves
+/// (`G_b^T G_b`, symmetric, in block order) over the rows `idx`: the part of a joint fit every
+/// candidate of a round shares, computed once per context and set of rows.
+pub type NuisanceGram = Vec<(usize, nalgebra::DMatrix<f64>)>;
+
 /// The nuisance parameters and their columns for every row of a context.
 #[derive(Debug)]
 pub struct NuisanceTable {
@@ -281,9 +286,7 @@ pub struct NuisanceTable {
     pub cols: Vec<Vec<[f64; 3]>>,
     /// The per-block products of the columns with themselves, per set of rows (keyed by a hash
     /// of the rows), computed on first use ([`NuisanceTable::gram`]).
-    pub grams: std::sync::Mutex<
-        std::collections::HashMap<u64, std::sync::Arc<crate::linear::NuisanceGram>>,
-    >,
+    pub grams: std::sync::Mutex<std::collections::HashMap<u64, std::sync::Arc<NuisanceGram>>>,
 }
 
 impl NuisanceTable {
@@ -296,13 +299,13 @@ impl NuisanceTable {
         }
     }
 
-    /// The per-block `G_b^T G_b` over the rows `idx` of `ctx` (whose table this is), in block
-    /// order; cached.
+    /// The per-block `G_b^T G_b` over the rows `idx` of the context whose table this is (`block`:
+    /// the block of each of its rows), in block order; cached.
     pub fn gram(
         &self,
-        ctx: &crate::context::Context,
+        block: &dyn Fn(usize) -> usize,
         idx: &[usize],
-    ) -> std::sync::Arc<crate::linear::NuisanceGram> {
+    ) -> std::sync::Arc<NuisanceGram> {
         use std::hash::{Hash, Hasher};
         let mut h = std::collections::hash_map::DefaultHasher::new();
         idx.hash(&mut h);
@@ -311,22 +314,18 @@ impl NuisanceTable {
             return g;
         }
         let n = self.nui.n;
-        let nb = idx
-            .iter()
-            .map(|&i| ctx.rows[i].block + 1)
-            .max()
-            .unwrap_or(1);
+        let nb = idx.iter().map(|&i| block(i) + 1).max().unwrap_or(1);
         let mut per: Vec<Option<nalgebra::DMatrix<f64>>> = vec![None; nb];
         for &i in idx {
             let g = &self.cols[i];
-            let m = per[ctx.rows[i].block].get_or_insert_with(|| nalgebra::DMatrix::zeros(n, n));
+            let m = per[block(i)].get_or_insert_with(|| nalgebra::DMatrix::zeros(n, n));
             for a in 0..n {
                 for b in a..n {
                     m[(a, b)] += g[a][0] * g[b][0] + g[a][1] * g[b][1] + g[a][2] * g[b][2];
                 }
             }
         }
-        let out: crate::linear::NuisanceGram = per
+        let out: NuisanceGram = per
             .into_iter()
             .enumerate()
             .filter_map(|(b, m)| {

@@ -27,7 +27,7 @@ pub struct Options {
     /// effects in the model ([`crate::recalibration`]); `None`: the calibration parameters are
     /// refined linearised only.
     #[serde(skip)]
-    pub recalibration: Option<std::sync::Arc<crate::recalibration::Recalibration>>,
+    pub recalibration: Option<std::sync::Arc<Recalibration>>,
 }
 
 impl Default for Options {
@@ -43,4 +43,17 @@ impl Default for Options {
             recalibration: None,
         }
     }
+}
+
+/// The static poses the analysis's first calibration was made from, so that it can be made
+/// again with the effects in the model
+/// ([`crate::recalibration`]).
+#[derive(Debug, Clone)]
+pub struct Recalibration {
+    /// The static poses.
+    pub data: pcr_calibration::StaticData,
+    /// Index of their recording among the analysed series.
+    pub series: usize,
+    /// The first calibration's settings.
+    pub options: pcr_calibration::calibrate::Options,
 }

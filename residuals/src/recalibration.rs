@@ -26,17 +26,7 @@ use pcr_calibration::calibrate::{calibrate_data, Options as CalOptions};
 use pcr_calibration::StaticData;
 use pcr_robot::RobotConfig;
 
-/// The static poses the analysis's first calibration was made from, so that it can be made
-/// again with the effects in the model.
-#[derive(Debug, Clone)]
-pub struct Recalibration {
-    /// The static poses.
-    pub data: StaticData,
-    /// Index of their recording among the analysed series.
-    pub series: usize,
-    /// The first calibration's settings.
-    pub options: CalOptions,
-}
+use crate::options::Recalibration;
 
 /// The calibration made again from `drawing` on the static poses as the model of `ctx` (whose
 /// configuration is `config`) says the robot reached and measured them, with `config`'s effects

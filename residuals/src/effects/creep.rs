@@ -162,8 +162,8 @@ impl Effect for Creep {
     }
 
     /// A history effect: the first against the second half of the training time.
-    fn consistency(&self) -> crate::consistency::Parts {
-        crate::consistency::Parts::Halves
+    fn consistency(&self) -> super::Parts {
+        super::Parts::Halves
     }
 
     fn file_position(&self) -> u8 {

@@ -22,8 +22,8 @@ impl Extension for ExternalLoad {
 }
 
 impl Effect for ExternalLoad {
-    fn consistency(&self) -> crate::consistency::Parts {
-        crate::consistency::Parts::Workspace
+    fn consistency(&self) -> super::Parts {
+        super::Parts::Workspace
     }
 
     fn name(&self) -> &'static str {

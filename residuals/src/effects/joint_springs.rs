@@ -24,8 +24,8 @@ impl Extension for JointSprings {
 }
 
 impl Effect for JointSprings {
-    fn consistency(&self) -> crate::consistency::Parts {
-        crate::consistency::Parts::Workspace
+    fn consistency(&self) -> super::Parts {
+        super::Parts::Workspace
     }
 
     fn name(&self) -> &'static str {

@@ -91,8 +91,8 @@ impl Effect for Latency {
     }
 
     /// Visible in motion only: the first against the second half of the training time.
-    fn consistency(&self) -> crate::consistency::Parts {
-        crate::consistency::Parts::Halves
+    fn consistency(&self) -> super::Parts {
+        super::Parts::Halves
     }
 
     fn file_position(&self) -> u8 {

@@ -81,6 +81,24 @@ pub struct Parameter {
     pub hi: f64,
 }
 
+/// Which independent parts of the training rows a candidate's parameters are compared on
+/// ([`Effect::consistency`]; [`crate::consistency`] splits the rows).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Parts {
+    /// Settled (static) rows against moving rows.
+    StaticMoving,
+    /// One recording against the others, or the first against the second half of the training
+    /// time when there is one recording.
+    Halves,
+    /// Static against moving rows, and then, for each leg, the rows where it bends less than
+    /// its median against those where it bends more: a load or a stiffness is the same over
+    /// the whole workspace, while an imitation of a cause that depends on the configuration
+    /// (a tendon pulling on another leg's) is not.
+    Workspace,
+    /// Leg i's bending below its median over the rows against above it.
+    Bending(usize),
+}
+
 /// One candidate effect: its vocabulary, its fit, its entry in the robot file. Its part of the
 /// prediction is the supertrait [`Extension`].
 pub trait Effect: Extension {
@@ -149,8 +167,8 @@ pub trait Effect: Extension {
 
     /// Which independent parts of the training rows its consistency is checked on
     /// ([`crate::consistency`]): static against moving rows by default.
-    fn consistency(&self) -> crate::consistency::Parts {
-        crate::consistency::Parts::StaticMoving
+    fn consistency(&self) -> Parts {
+        Parts::StaticMoving
     }
 
     /// Why the robot file's entry is not a physical explanation, if it is not; `max_change` is

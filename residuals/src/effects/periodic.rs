@@ -265,8 +265,8 @@ impl Effect for Periodic {
 
     /// The first half of the training time against the second: both halves take every position
     /// of the motor at rest and moving, the static rows alone take too few of them.
-    fn consistency(&self) -> crate::consistency::Parts {
-        crate::consistency::Parts::Halves
+    fn consistency(&self) -> super::Parts {
+        super::Parts::Halves
     }
 
     /// The amplitude (steps) and the phase (deg) of every term.
