@@ -981,6 +981,15 @@ fn from_drawing<'a>(
         let t = c.test();
         c.sse(&t, None) / t.len().max(1) as f64
     };
+    // The iterates are judged on the held-out rows alone: their contexts predict those
+    // ([`Context::held_out`]; the recalibration reads the static poses' tendon displacements,
+    // which every row's prediction carries, solved or not), and the one returned is predicted
+    // on every row at the end.
+    let n_test = ctx.test().len();
+    let judged = |model: ExtendedModel| {
+        Some(Context::held_out(set.series, model, set.blocks, set.w_phi))
+            .filter(|c| c.rows.len() + 5 >= n_test)
+    };
     // One alternation from (config, ctx): the calibration from the drawing with its effects,
     // then its effects refined on it.
     let alternate = |config: &RobotConfig,
@@ -989,8 +998,21 @@ fn from_drawing<'a>(
         let cal = crate::recalibration::recalibrated(config, ctx, set.drawing, recal)?;
         let refined = crate::refine::search(&cal, &ctx.model, set.series, set.blocks, set.w_phi);
         let model = ExtendedModel::like(&refined, &ctx.model).ok()?;
-        let full = Context::new(set.series, model, set.blocks, set.w_phi);
-        (full.rows.len() + 5 >= ctx.rows.len()).then_some((refined, full))
+        judged(model).map(|c| (refined, c))
+    };
+    let n_rows = ctx.rows.len();
+    let start = (config.clone(), ctx.clone());
+    // Every row of the iterate kept, or the start where its model does not predict them.
+    let finish = |best: (RobotConfig, Context<'a>)| {
+        if best.1.rows.len() == n_rows {
+            return best;
+        }
+        let full = Context::new(set.series, best.1.model.clone(), set.blocks, set.w_phi);
+        if full.rows.len() + 5 >= n_rows {
+            (best.0, full)
+        } else {
+            start
+        }
     };
     let mut best_ms = held_out(&ctx);
     // The effects' parameters of every iterate, the first one included.
@@ -1029,17 +1051,16 @@ fn from_drawing<'a>(
         .then(|| aitken(&iterates[n - 3], &iterates[n - 2], &iterates[n - 1]))
         .flatten()
     else {
-        return best;
+        return finish(best);
     };
     let from = last.as_ref().unwrap_or(&best);
     let mut jumped = from.0.clone();
     crate::refine::set_values(&mut jumped.effects, &target);
     let Some(jctx) = ExtendedModel::like(&jumped, &from.1.model)
         .ok()
-        .map(|m| Context::new(set.series, m, set.blocks, set.w_phi))
-        .filter(|c| c.rows.len() + 5 >= from.1.rows.len())
+        .and_then(judged)
     else {
-        return best;
+        return finish(best);
     };
     if let Some((refined, full)) = alternate(&jumped, &jctx) {
         let ms = held_out(&full);
@@ -1054,7 +1075,7 @@ fn from_drawing<'a>(
             best = (refined, full);
         }
     }
-    best
+    finish(best)
 }
 
 /// Why the effects of `c` are not physical ([`effects_unphysical`] at `max_change`), except a

@@ -89,6 +89,20 @@ impl<'a> Context<'a> {
         })
     }
 
+    /// [`Context::new`] on the held-out rows alone: the training rows are neither solved nor
+    /// listed (their predictions carry the effective motor positions and tendon displacements
+    /// only). For judging a model on the held-out rows.
+    pub fn held_out(
+        series: &'a [Series],
+        model: ExtendedModel,
+        blocks: &Blocks,
+        w_phi: f64,
+    ) -> Self {
+        Self::of_rows(series, model, blocks, w_phi, &|si, k| {
+            blocks.held_out[blocks.block[si][k]]
+        })
+    }
+
     /// The sum of squared residuals over the rows [`Context::training_subset`] keeps.
     pub fn training_subset_sse(&self, every: usize) -> f64 {
         let idx: Vec<usize> = (0..self.rows.len())
