@@ -38,8 +38,8 @@ pub(crate) fn accept<'a>(
     // The steps compare training errors: their contexts hold every `ACCEPTANCE_EVERY`-th
     // training row alone.
     let start = ctx.training_subset(ACCEPTANCE_EVERY);
-    let n_train = start.rows.len();
-    let start_sse = start.sse(&start.train(), None);
+    let n_train = start.len();
+    let start_sse = ctx.sse(&start, None);
     let mut cur: Option<(RobotConfig, Context<'a>, f64)> = None;
     let mut step = Some(first);
     // Damping carried from one step to the next (a step that needed 1/4 starts the next at 1/2).
@@ -112,7 +112,7 @@ pub(crate) fn accept<'a>(
         if let Ok(model) = ExtendedModel::like(&refined, &ctx.model) {
             let rctx = Context::new(series, model, blocks, w_phi);
             if rctx.rows.len() + 5 >= ctx.rows.len()
-                && rctx.training_subset_sse(ACCEPTANCE_EVERY) < sse
+                && rctx.sse(&rctx.training_subset(ACCEPTANCE_EVERY), None) < sse
             {
                 return Some((refined, rctx));
             }

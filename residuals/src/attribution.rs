@@ -1008,16 +1008,15 @@ fn from_drawing<'a>(
         let model = ExtendedModel::like(&refined, &ctx.model).ok()?;
         judged(model).map(|c| (refined, c))
     };
-    let n_rows = ctx.rows.len();
-    let start = (config.clone(), ctx.clone());
-    // Every row of the iterate kept, or the start where its model does not predict them.
-    let finish = |best: (RobotConfig, Context<'a>)| {
-        if best.1.rows.len() == n_rows {
-            return best;
-        }
-        let full = Context::new(set.series, best.1.model.clone(), set.blocks, set.w_phi);
-        if full.rows.len() + 5 >= n_rows {
-            (best.0, full)
+    // The iterate kept (the best held-out result, `None`: the start) with every row predicted;
+    // the start where its model does not predict them.
+    let finish = |best: Option<(RobotConfig, Context<'a>)>, start: (RobotConfig, Context<'a>)| {
+        let Some((config, judged)) = best else {
+            return start;
+        };
+        let full = Context::new(set.series, judged.model, set.blocks, set.w_phi);
+        if full.rows.len() + 5 >= start.1.rows.len() {
+            (config, full)
         } else {
             start
         }
@@ -1025,10 +1024,11 @@ fn from_drawing<'a>(
     let mut best_ms = held_out(&ctx);
     // The effects' parameters of every iterate, the first one included.
     let mut iterates = vec![crate::refine::values(&config.effects)];
-    let mut best = (config, ctx);
+    let start = (config, ctx);
+    let mut best: Option<(RobotConfig, Context<'a>)> = None;
     let mut last: Option<(RobotConfig, Context<'a>)> = None;
     for _ in 0..FROM_DRAWING_ROUNDS {
-        let from = last.as_ref().unwrap_or(&best);
+        let from = last.as_ref().or(best.as_ref()).unwrap_or(&start);
         let Some((refined, full)) = alternate(&from.0, &from.1) else {
             break;
         };
@@ -1044,7 +1044,7 @@ fn from_drawing<'a>(
         let gain = ms < FROM_DRAWING_GAIN * best_ms;
         if ms < best_ms {
             best_ms = ms;
-            best = (refined, full);
+            best = Some((refined, full));
             last = None;
         } else {
             last = Some((refined, full));
@@ -1059,7 +1059,7 @@ fn from_drawing<'a>(
         .then(|| aitken(&iterates[n - 3], &iterates[n - 2], &iterates[n - 1]))
         .flatten()
     else {
-        return finish(best);
+        return finish(best, start);
     };
     // Where the alternation has arrived (no parameter would move by more than
     // `MIN_EXTRAPOLATION` of its value), another alternation is not made for it.
@@ -1068,16 +1068,16 @@ fn from_drawing<'a>(
         .zip(&iterates[n - 1])
         .all(|(t, v)| (t - v).abs() <= MIN_EXTRAPOLATION * v.abs())
     {
-        return finish(best);
+        return finish(best, start);
     }
-    let from = last.as_ref().unwrap_or(&best);
+    let from = last.as_ref().or(best.as_ref()).unwrap_or(&start);
     let mut jumped = from.0.clone();
     crate::refine::set_values(&mut jumped.effects, &target);
     let Some(jctx) = ExtendedModel::like(&jumped, &from.1.model)
         .ok()
         .and_then(judged)
     else {
-        return finish(best);
+        return finish(best, start);
     };
     if let Some((refined, full)) = alternate(&jumped, &jctx) {
         let ms = held_out(&full);
@@ -1089,10 +1089,10 @@ fn from_drawing<'a>(
             "calibration from the drawing, extrapolated"
         );
         if ms < best_ms {
-            best = (refined, full);
+            best = Some((refined, full));
         }
     }
-    finish(best)
+    finish(best, start)
 }
 
 /// Why the effects of `c` are not physical ([`effects_unphysical`] at `max_change`), except a
