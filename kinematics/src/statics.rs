@@ -491,6 +491,22 @@ pub struct LoadedWarm {
     inv: Option<MN>,
 }
 
+impl LoadedWarm {
+    /// Starts the next solve from the solution and inverse Jacobian `other` holds (the same
+    /// configuration solved for a nearby robot or nearby loads: an evaluation of a fit before
+    /// this one), keeping this state's rest angles; nothing is extrapolated. Nothing changes
+    /// when `other` holds no solution.
+    pub fn resume_from(&mut self, other: &LoadedWarm) {
+        if other.z.is_none() {
+            return;
+        }
+        self.z = other.z;
+        self.rigid = other.rigid;
+        self.before = None;
+        self.inv = other.inv;
+    }
+}
+
 impl Robot {
     /// The 2x2 compliance of leg i's joint M_i to a small force at the segment tip (base frame,
     /// mm/N), for curvature `kappa` and bending stiffness `ei` (N mm^2), total bending held:
@@ -1463,6 +1479,46 @@ mod tests {
                 assert!((hot.lambda[i] - cold.lambda[i]).abs() < 1e-7, "row {k}");
             }
         }
+    }
+
+    /// A solve resumed from the same configuration's state for nearby loads (a fit's
+    /// evaluation after another) finds the cold equilibrium of the new loads.
+    #[test]
+    fn a_solve_resumed_from_nearby_loads_finds_the_cold_equilibrium() {
+        let r = Robot::nominal();
+        let loads = Loads {
+            force: [0.4, -0.3],
+            k_m: 300.0,
+            k_p: 200.0,
+            ..unloaded()
+        };
+        let target = Pose::from_mm_deg(10.0, -5.0, 3.0);
+        let kappa = r.ik(&target).unwrap().kappa;
+        let mut first = LoadedWarm::default();
+        r.fk_loaded_warm(&kappa, &loads, &target, &mut first)
+            .unwrap();
+        let nearby = Loads {
+            force: [0.45, -0.28],
+            k_m: 310.0,
+            ..loads
+        };
+        // Another series' state (rest angles known), resumed from this row's.
+        let mut warm = LoadedWarm::default();
+        let other = Pose::from_mm_deg(-20.0, 15.0, -4.0);
+        let k_other = r.ik(&other).unwrap().kappa;
+        r.fk_loaded_warm(&k_other, &loads, &other, &mut warm)
+            .unwrap();
+        warm.resume_from(&first);
+        let hot = r
+            .fk_loaded_warm(&kappa, &nearby, &target, &mut warm)
+            .unwrap();
+        let cold = r.fk_loaded(&kappa, &nearby, &target).unwrap();
+        assert!(hot.pose.position_distance(&cold.pose) < 1e-8);
+        assert!((hot.pose.phi - cold.pose.phi).abs() < 1e-9);
+        // Nothing to resume from: the state stays as it was.
+        let before = warm.clone();
+        warm.resume_from(&LoadedWarm::default());
+        assert_eq!(warm.z, before.z);
     }
 
     #[test]

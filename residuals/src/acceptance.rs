@@ -60,7 +60,10 @@ pub(crate) fn accept<'a>(
                 .validate("extended robot")
                 .ok()
                 .and_then(|_| ExtendedModel::like(&cand, &ctx.model).ok())
-                .map(|m| Context::training(series, m, blocks, w_phi, ACCEPTANCE_EVERY))
+                .map(|m| {
+                    let least = n_train.saturating_sub(5);
+                    Context::training(series, m, blocks, w_phi, ACCEPTANCE_EVERY, least)
+                })
                 .filter(|n| n.rows.len() + 5 >= n_train);
             if let Some(nctx) = nctx {
                 let sse = nctx.sse(&nctx.train(), None);
@@ -110,7 +113,8 @@ pub(crate) fn accept<'a>(
     let refined = crate::refine::search(&cfg, &ctx.model, series, blocks, w_phi);
     if refined != cfg {
         if let Ok(model) = ExtendedModel::like(&refined, &ctx.model) {
-            let rctx = Context::new(series, model, blocks, w_phi);
+            let least = ctx.rows.len().saturating_sub(5);
+            let rctx = Context::at_least(series, model, blocks, w_phi, least);
             if rctx.rows.len() + 5 >= ctx.rows.len()
                 && rctx.sse(&rctx.training_subset(ACCEPTANCE_EVERY), None) < sse
             {

@@ -71,36 +71,50 @@ pub const MAX_RESPONSE_ERROR: f64 = 0.005;
 impl<'a> Context<'a> {
     /// Predicts every series with `model` and collects the residuals.
     pub fn new(series: &'a [Series], model: ExtendedModel, blocks: &Blocks, w_phi: f64) -> Self {
-        Self::of_rows(series, model, blocks, w_phi, &|_, _| true)
+        Self::of_rows(series, model, blocks, w_phi, &|_, _| true, 0)
+    }
+
+    /// [`Context::new`] for a model that is only of use when it predicts at least `min_rows`
+    /// rows: the prediction stops once it cannot (the context then holds fewer).
+    pub fn at_least(
+        series: &'a [Series],
+        model: ExtendedModel,
+        blocks: &Blocks,
+        w_phi: f64,
+        min_rows: usize,
+    ) -> Self {
+        Self::of_rows(series, model, blocks, w_phi, &|_, _| true, min_rows)
     }
 
     /// [`Context::new`] on every `every`-th training row of each series alone (row index a
     /// multiple of `every`): the other rows are neither predicted nor listed. For the steps of
-    /// a search that compare training errors only.
+    /// a search that compare training errors only. As [`Context::at_least`] `min_rows`.
     pub fn training(
         series: &'a [Series],
         model: ExtendedModel,
         blocks: &Blocks,
         w_phi: f64,
         every: usize,
+        min_rows: usize,
     ) -> Self {
-        Self::of_rows(series, model, blocks, w_phi, &|si, k| {
+        let wanted = |si: usize, k: usize| {
             in_training_subset(blocks.held_out[blocks.block[si][k]], k, every)
-        })
+        };
+        Self::of_rows(series, model, blocks, w_phi, &wanted, min_rows)
     }
 
     /// [`Context::new`] on the held-out rows alone: the training rows are neither solved nor
     /// listed (their predictions carry the effective motor positions and tendon displacements
-    /// only). For judging a model on the held-out rows.
+    /// only). For judging a model on the held-out rows. As [`Context::at_least`] `min_rows`.
     pub fn held_out(
         series: &'a [Series],
         model: ExtendedModel,
         blocks: &Blocks,
         w_phi: f64,
+        min_rows: usize,
     ) -> Self {
-        Self::of_rows(series, model, blocks, w_phi, &|si, k| {
-            blocks.held_out[blocks.block[si][k]]
-        })
+        let wanted = |si: usize, k: usize| blocks.held_out[blocks.block[si][k]];
+        Self::of_rows(series, model, blocks, w_phi, &wanted, min_rows)
     }
 
     /// Indices (into `rows`) of the training rows [`Context::training`] with `every` keeps.
@@ -111,7 +125,10 @@ impl<'a> Context<'a> {
     }
 
     /// The rows of this context predicted by another model, in the same order with the same
-    /// blocks (the held-out rows too); `None` when the model does not predict one of them.
+    /// blocks (the held-out rows too); `None` when the model does not predict one of them (the
+    /// prediction stops at the first: a model whose rigid kinematics do not close anywhere, a
+    /// large linearised step of the calibration, cost 4 s of joint springs at 10x solving
+    /// every row in vain).
     pub fn same_rows(&self, model: ExtendedModel) -> Option<Context<'a>> {
         let started = std::time::Instant::now();
         let mut want: Vec<std::collections::HashSet<usize>> =
@@ -119,12 +136,26 @@ impl<'a> Context<'a> {
         for r in &self.rows {
             want[r.s].insert(r.k);
         }
+        let failures = std::sync::atomic::AtomicUsize::new(0);
         let preds: Vec<Vec<Prediction>> = self
             .series
             .iter()
             .zip(&want)
-            .map(|(s, w)| model.predict_where(s, &|k| w.contains(&k)))
+            .map(|(s, w)| {
+                let how = crate::model::Solving {
+                    failures: Some((&failures, 0)),
+                    ..Default::default()
+                };
+                model.predict_where_from(s, &|k| w.contains(&k), how)
+            })
             .collect();
+        if failures.load(std::sync::atomic::Ordering::Relaxed) > 0 {
+            tracing::debug!(
+                seconds = started.elapsed().as_secs_f64(),
+                "context on the same rows: a row is not predicted"
+            );
+            return None;
+        }
         let mut rows = Vec::with_capacity(self.rows.len());
         for r in &self.rows {
             let m = self.series[r.s].samples[r.k].pose?;
@@ -151,18 +182,40 @@ impl<'a> Context<'a> {
         })
     }
 
+    /// The context of the `wanted` rows (series, row); the prediction stops once fewer than
+    /// `min_rows` of them could be predicted.
     fn of_rows(
         series: &'a [Series],
         model: ExtendedModel,
         blocks: &Blocks,
         w_phi: f64,
         wanted: &(dyn Fn(usize, usize) -> bool + Sync),
+        min_rows: usize,
     ) -> Self {
         let started = std::time::Instant::now();
+        // The measured rows wanted: more failures than these less `min_rows` and the context
+        // is of no use.
+        let measured: usize = series
+            .iter()
+            .enumerate()
+            .map(|(si, s)| {
+                (0..s.samples.len())
+                    .filter(|&k| s.samples[k].pose.is_some() && wanted(si, k))
+                    .count()
+            })
+            .sum();
+        let failures = std::sync::atomic::AtomicUsize::new(0);
+        let how = crate::model::Solving {
+            failures: (min_rows > 0).then_some((&failures, measured.saturating_sub(min_rows))),
+            ..Default::default()
+        };
         let preds: Vec<Vec<Prediction>> = series
             .iter()
             .enumerate()
-            .map(|(si, s)| model.predict_where(s, &|k| wanted(si, k)))
+            .map(|(si, s)| {
+                // A row without a measurement is not counted.
+                model.predict_where_from(s, &|k| wanted(si, k), how)
+            })
             .collect();
         let mut rows = Vec::new();
         let mut unpredicted = 0;
@@ -630,7 +683,7 @@ mod tests {
         assert!(blocks.held_out.iter().any(|&h| h));
         let model = ExtendedModel::new(&cfg, crate::effects::chain()).unwrap();
         let full = Context::new(&series, model.clone(), &blocks, 50.0);
-        let thin = Context::training(&series, model, &blocks, 50.0, 4);
+        let thin = Context::training(&series, model, &blocks, 50.0, 4, 0);
         let cut = full.training_subset(4);
         assert!(!thin.rows.is_empty() && thin.rows.len() < full.train().len() / 3);
         // The same rows; the residuals to the forward kinematics' tolerance (each solve is
@@ -649,5 +702,50 @@ mod tests {
         let sse = thin.sse(&thin.train(), None);
         assert!(sse > 0.0);
         assert!((full.sse(&cut, None) - sse).abs() < 1e-9 * sse);
+    }
+
+    /// A context that must hold at least so many rows stops predicting once it cannot
+    /// ([`Context::at_least`]), and holds every row it can where it can.
+    #[test]
+    fn a_context_that_cannot_hold_enough_rows_stops_predicting() {
+        let cfg = RobotConfig::nominal();
+        let robot = pcr_kinematics::Robot::new(&cfg).unwrap();
+        let home = robot.home_motor_steps();
+        let mut rec = pcr_recording::Recording::default();
+        // 100 rows the robot cannot reach (the motors far beyond any curvature the legs take),
+        // then 100 it can.
+        for k in 0..200 {
+            let t = k as f64 * 0.02;
+            let far = if k < 100 { 1e7 } else { 0.0 };
+            let q: [i32; 3] = std::array::from_fn(|i| {
+                (home[i] + far + 40.0 * (0.7 * t + i as f64).sin()).round() as i32
+            });
+            let mut r = pcr_recording::Row::new(t, q);
+            r.pose = [Some(0.0), Some(0.0), Some(0.0)];
+            rec.rows.push(r);
+        }
+        let series = vec![Series::from_recording(&rec, "t").unwrap()];
+        let blocks = Blocks::in_time(&series, 1.0, 3);
+        let model = ExtendedModel::new(&cfg, crate::effects::chain()).unwrap();
+        let full = Context::new(&series, model.clone(), &blocks, 50.0);
+        assert_eq!((full.rows.len(), full.unpredicted), (100, 100));
+        // Enough rows: the same context.
+        let enough = Context::at_least(&series, model.clone(), &blocks, 50.0, 100);
+        assert_eq!(enough.rows.len(), 100);
+        for (a, b) in enough.rows.iter().zip(&full.rows) {
+            assert_eq!((a.s, a.k, a.r), (b.s, b.k, b.r));
+        }
+        // One more than it can hold: it stops after the 100 failures, before the rows it could
+        // have predicted.
+        let short = Context::at_least(&series, model.clone(), &blocks, 50.0, 101);
+        assert!(short.rows.is_empty(), "{}", short.rows.len());
+        // The same rows predicted by a model that fails on one of them: none.
+        assert!(full.same_rows(model.clone()).is_some());
+        let mut all = Context::new(&series, model.clone(), &blocks, 50.0);
+        all.rows.push(RowRef {
+            k: 0,
+            ..all.rows[0]
+        });
+        assert!(all.same_rows(model).is_none());
     }
 }

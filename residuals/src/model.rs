@@ -20,7 +20,7 @@
 use crate::extension::Chain;
 use crate::series::Series;
 use nalgebra::Matrix3;
-use pcr_kinematics::statics::Loads;
+use pcr_kinematics::statics::{LoadedWarm, Loads};
 use pcr_kinematics::{Pose, Robot};
 use pcr_robot::effects::Effects;
 use pcr_robot::RobotConfig;
@@ -35,6 +35,58 @@ pub const DEFLECTION_TOLERANCE_MM: f64 = 1e-3;
 
 /// Largest error (rad) of an interpolated deflection of the platform orientation.
 pub const DEFLECTION_TOLERANCE_RAD: f64 = 2e-5;
+
+/// The loaded solver's state at each row of one series that was solved with it (row index to
+/// state), kept from one prediction of the row to the next: a fit's evaluations predict the
+/// same rows with nearby models, and a row started from its own last equilibrium converges in
+/// a step or two where one started from the previous row of a subsample needs several and a
+/// fresh Jacobian ([`ExtendedModel::predict_where_from`], [`ExtendedModel::sensitivities`]).
+pub type RowStates = std::sync::Mutex<std::collections::HashMap<usize, LoadedWarm>>;
+
+/// Stages 1 to 4 of every row of a series ([`ExtendedModel::tendons`]): the effective motor
+/// positions (steps), the effective tendon displacements (mm), and the legs' mm per step.
+type Tendons = (Vec<[f64; 3]>, Vec<[f64; 3]>, [f64; 3]);
+
+/// How a prediction solves its rows beyond the defaults ([`ExtendedModel::predict_where_from`]).
+#[derive(Default, Clone, Copy)]
+pub struct Solving<'s> {
+    /// Loaded rows solved in sequence start from the state kept here for them, and keep theirs.
+    pub states: Option<&'s RowStates>,
+    /// The wanted rows with a measured pose that had none predicted, and how many the caller
+    /// can do with: once there are more, the rows not yet solved are left unsolved (a caller
+    /// that needs every row stops at the first it cannot have).
+    pub failures: Option<(&'s std::sync::atomic::AtomicUsize, usize)>,
+}
+
+impl Solving<'_> {
+    fn stopped(&self) -> bool {
+        self.failures
+            .is_some_and(|(n, most)| n.load(std::sync::atomic::Ordering::Relaxed) > most)
+    }
+
+    /// Counts a wanted row left without a pose (only one with a measurement counts).
+    fn failed(&self, measured: bool) {
+        if let (Some((n, _)), true) = (self.failures, measured) {
+            n.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        }
+    }
+}
+
+/// Starts `warm` from the state `states` holds for row `k`, if any.
+fn resume(states: Option<&RowStates>, k: usize, warm: &mut LoadedWarm) {
+    if let Some(Ok(m)) = states.map(|s| s.lock()) {
+        if let Some(w) = m.get(&k) {
+            warm.resume_from(w);
+        }
+    }
+}
+
+/// Keeps `warm` (just solved at row `k`) in `states`.
+fn keep(states: Option<&RowStates>, k: usize, warm: &LoadedWarm) {
+    if let Some(Ok(mut m)) = states.map(|s| s.lock()) {
+        m.insert(k, warm.clone());
+    }
+}
 
 /// The prediction for one row.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -135,20 +187,36 @@ impl ExtendedModel {
         s: &Series,
         want: &(dyn Fn(usize) -> bool + Sync),
     ) -> Vec<Prediction> {
-        let (q_eff, dl_eff, mmps) = self.tendons(s);
+        self.predict_where_from(s, want, Solving::default())
+    }
+
+    /// [`ExtendedModel::predict_where`] solved as `how` says: a loaded row solved in sequence
+    /// (not interpolated) started from the state `how.states` keeps for it from an earlier
+    /// prediction (of a nearby model), and its state kept there; the rows left unsolved once a
+    /// wanted row fails, with `how.stop`.
+    pub fn predict_where_from(
+        &self,
+        s: &Series,
+        want: &(dyn Fn(usize) -> bool + Sync),
+        how: Solving,
+    ) -> Vec<Prediction> {
+        let tendons = self.tendons(s);
         let n = s.samples.len();
         let chunk = if self.exact { n.max(1) } else { PREDICT_CHUNK };
         let starts: Vec<usize> = (0..n).step_by(chunk).collect();
         let parts: Vec<Vec<Prediction>> = starts
             .par_iter()
-            .map(|&k0| self.predict_range(s, k0..(k0 + chunk).min(n), &q_eff, &dl_eff, &mmps, want))
+            .map(|&k0| {
+                let range = k0..(k0 + chunk).min(n);
+                self.predict_range(s, range, &tendons, want, how)
+            })
             .collect();
         parts.concat()
     }
 
     /// Stages 1 to 4 of every row of a series: the effective motor positions (steps), the
     /// effective tendon displacements (mm), and the legs' mm per step.
-    fn tendons(&self, s: &Series) -> (Vec<[f64; 3]>, Vec<[f64; 3]>, [f64; 3]) {
+    fn tendons(&self, s: &Series) -> Tendons {
         let e = &self.config.effects;
         let q_eff = self.effective_steps(s, e);
         let mmps: [f64; 3] = std::array::from_fn(|i| self.config.legs[i].actuation.mm_per_step());
@@ -178,7 +246,15 @@ impl ExtendedModel {
     /// solving the kinematics again per parameter. `None` where the model has no pose. The
     /// rows are solved in chunks in parallel, each warm-started along the chunk from the
     /// measured poses.
-    pub fn sensitivities(&self, s: &Series, rows: &[usize]) -> Vec<Option<Sensitivity>> {
+    ///
+    /// With `states`, a loaded row is started from the state kept for it (an earlier solve of
+    /// the row for a nearby model), and its state is kept there.
+    pub fn sensitivities(
+        &self,
+        s: &Series,
+        rows: &[usize],
+        states: Option<&RowStates>,
+    ) -> Vec<Option<Sensitivity>> {
         const CHUNK: usize = 256;
         let kappa = self.curvatures(s, rows);
         let parts: Vec<Vec<Option<Sensitivity>>> = rows
@@ -194,16 +270,21 @@ impl ExtendedModel {
                             guess = Pose::new(p[0], p[1], p[2]);
                         }
                         let out = match &self.loads {
-                            Some(l) => self
-                                .robot
-                                .loaded_sensitivity_warm(&kp, l, &guess, &mut warm)
-                                .ok()
-                                .map(|x| Sensitivity {
+                            Some(l) => {
+                                resume(states, k, &mut warm);
+                                let x = self
+                                    .robot
+                                    .loaded_sensitivity_warm(&kp, l, &guess, &mut warm);
+                                if x.is_ok() {
+                                    keep(states, k, &warm);
+                                }
+                                x.ok().map(|x| Sensitivity {
                                     pose: [x.pose.x, x.pose.y, x.pose.phi],
                                     kappa: kp,
                                     d_kappa: Matrix3::from_fn(|r, c| x.d_kappa[c][r]),
                                     d_loads: x.d_loads,
-                                }),
+                                })
+                            }
                             None => self.robot.fk_warm(&kp, &guess).ok().and_then(|p| {
                                 Some(Sensitivity {
                                     pose: [p.x, p.y, p.phi],
@@ -272,11 +353,11 @@ impl ExtendedModel {
         &self,
         s: &Series,
         range: std::ops::Range<usize>,
-        q_eff: &[[f64; 3]],
-        dl_eff: &[[f64; 3]],
-        mmps: &[f64; 3],
+        tendons: &Tendons,
         want: &(dyn Fn(usize) -> bool + Sync),
+        how: Solving,
     ) -> Vec<Prediction> {
+        let (q_eff, dl_eff, mmps) = (&tendons.0, &tendons.1, &tendons.2);
         let Some(loads) = &self.loads else {
             return Vec::new();
         };
@@ -293,7 +374,7 @@ impl ExtendedModel {
             if let Some(p) = smp.pose {
                 guess = Pose::new(p[0], p[1], p[2]);
             }
-            if !want(k) {
+            if !want(k) || how.stopped() {
                 out.push(pred);
                 source.push(None);
                 continue;
@@ -313,6 +394,7 @@ impl ExtendedModel {
                 unique.push(k);
                 source.push(Some(k));
             } else {
+                how.failed(smp.pose.is_some());
                 source.push(None);
             }
             pred.pose = rigid.map(|p| [p.x, p.y, p.phi]);
@@ -380,7 +462,10 @@ impl ExtendedModel {
             let p = &mut out[k - k0];
             p.pose = match (p.pose, d) {
                 (Some(r), Some(d)) => Some([r[0] + d[0], r[1] + d[1], r[2] + d[2]]),
-                _ => None,
+                _ => {
+                    how.failed(s.samples[k].pose.is_some());
+                    None
+                }
             };
             if let Some(q) = p.pose {
                 let (j_q, j_kappa) =
@@ -409,17 +494,17 @@ impl ExtendedModel {
         &self,
         s: &Series,
         range: std::ops::Range<usize>,
-        q_eff: &[[f64; 3]],
-        dl_eff: &[[f64; 3]],
-        mmps: &[f64; 3],
+        tendons: &Tendons,
         want: &(dyn Fn(usize) -> bool + Sync),
+        how: Solving,
     ) -> Vec<Prediction> {
+        let (q_eff, dl_eff, mmps) = (&tendons.0, &tendons.1, &tendons.2);
         // With joint springs every row is solved in sequence: their deflection is rough in the
         // configuration (the motors step one at a time), 98 % of the rows failed the
         // interpolation's check, and its overhead cost 15-20 % over solving every row.
         let springs = self.loads.is_some_and(|l| l.k_m != 0.0 || l.k_p != 0.0);
         if self.loads.is_some() && !springs && !self.exact && self.interpolate {
-            return self.predict_range_loaded(s, range, q_eff, dl_eff, mmps, want);
+            return self.predict_range_loaded(s, range, tendons, want, how);
         }
         let mut out: Vec<Prediction> = Vec::with_capacity(range.len());
         let mut warm = pcr_kinematics::statics::LoadedWarm::default();
@@ -432,7 +517,7 @@ impl ExtendedModel {
             if let Some(p) = smp.pose {
                 guess = Pose::new(p[0], p[1], p[2]);
             }
-            if !want(k) {
+            if !want(k) || how.stopped() {
                 out.push(pred);
                 continue;
             }
@@ -451,18 +536,25 @@ impl ExtendedModel {
                 Some(l) if self.exact => {
                     self.robot.fk_loaded(&kappa, l, &guess).ok().map(|e| e.pose)
                 }
-                Some(l) => self
-                    .robot
-                    .fk_loaded_warm(&kappa, l, &guess, &mut warm)
-                    .or_else(|_| self.robot.fk_loaded(&kappa, l, &guess))
-                    .ok()
-                    .map(|e| e.pose),
+                Some(l) => {
+                    resume(how.states, k, &mut warm);
+                    let e = self.robot.fk_loaded_warm(&kappa, l, &guess, &mut warm);
+                    if e.is_ok() {
+                        keep(how.states, k, &warm);
+                    }
+                    e.or_else(|_| self.robot.fk_loaded(&kappa, l, &guess))
+                        .ok()
+                        .map(|e| e.pose)
+                }
                 None => self.robot.fk_warm(&kappa, &guess).ok(),
             };
-            if let Some(p) = pose {
-                (pred.j_q, pred.j_kappa) = self.jacobians(&p, &kappa, &dl_eff[k], mmps);
-                pred.pose = Some([p.x, p.y, p.phi]);
-                guess = p;
+            match pose {
+                Some(p) => {
+                    (pred.j_q, pred.j_kappa) = self.jacobians(&p, &kappa, &dl_eff[k], mmps);
+                    pred.pose = Some([p.x, p.y, p.phi]);
+                    guess = p;
+                }
+                None => how.failed(smp.pose.is_some()),
             }
             out.push(pred);
         }
@@ -570,5 +662,52 @@ mod tests {
             d[5]
         );
         assert_eq!(delayed_steps(&s, -1.0)[3], [90.0, 0.0, -9.0]);
+    }
+
+    /// Rows solved from the states an earlier prediction kept for them (a fit's evaluations)
+    /// are the rows solved along the series, to the solver's tolerance, for other loads too.
+    #[test]
+    fn rows_resumed_from_their_states_are_the_rows_solved_in_sequence() {
+        let mut cfg = RobotConfig::nominal();
+        let home = Robot::new(&cfg).unwrap().home_motor_steps();
+        let mut rec = pcr_recording::Recording::default();
+        for k in 0..300 {
+            let t = k as f64 * 0.02;
+            let q: [i32; 3] = std::array::from_fn(|i| {
+                (home[i] + 80.0 * (0.9 * t + i as f64).sin()).round() as i32
+            });
+            let mut r = pcr_recording::Row::new(t, q);
+            r.pose = [Some(0.0); 3];
+            rec.rows.push(r);
+        }
+        let s = Series::from_recording(&rec, "t").unwrap();
+        let states = RowStates::default();
+        let every_fifth = |k: usize| k.is_multiple_of(5);
+        for (force, k_m) in [([0.4, -0.3], 300.0), ([0.5, -0.2], 320.0)] {
+            cfg.effects.compliance = Some(pcr_robot::effects::Compliance {
+                ei_n_mm2: 6.5e4,
+                force_n: force,
+                couple_n_mm: 0.0,
+                k_m_n_mm_per_rad: k_m,
+                k_p_n_mm_per_rad: 200.0,
+            });
+            let mut m = ExtendedModel::new(&cfg, crate::effects::chain()).unwrap();
+            m.interpolate = false;
+            let plain = m.predict_where(&s, &every_fifth);
+            let how = Solving {
+                states: Some(&states),
+                ..Default::default()
+            };
+            let resumed = m.predict_where_from(&s, &every_fifth, how);
+            assert_eq!(states.lock().unwrap().len(), 60);
+            for (k, (a, b)) in plain.iter().zip(&resumed).enumerate() {
+                assert_eq!(a.pose.is_some(), every_fifth(k), "row {k}");
+                if let (Some(a), Some(b)) = (a.pose, b.pose) {
+                    for c in 0..3 {
+                        assert!((a[c] - b[c]).abs() < 1e-8, "row {k}: {a:?} {b:?}");
+                    }
+                }
+            }
+        }
     }
 }

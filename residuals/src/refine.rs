@@ -106,6 +106,9 @@ struct Refit<'a> {
     w_phi: f64,
     /// The calibration parameters, linearised at `base`.
     nuisance: Option<Linearised>,
+    /// Per series, the loaded solver's state at each refined row, from the evaluation before
+    /// (each evaluation starts a row from its own last equilibrium).
+    states: Vec<crate::model::RowStates>,
 }
 
 /// The calibration parameters linearised at the refinement's start: their columns on the
@@ -250,7 +253,8 @@ impl Refit<'_> {
             .series
             .iter()
             .zip(&self.rows)
-            .map(|(s, rows)| model.sensitivities(s, rows))
+            .zip(&self.states)
+            .map(|((s, rows), st)| model.sensitivities(s, rows, Some(st)))
             .collect();
         let springs = model.loads.is_some_and(|l| l.k_m != 0.0 || l.k_p != 0.0);
         let rest = springs.then(|| model.robot.home_joint_angles());
@@ -335,9 +339,13 @@ impl Refit<'_> {
     fn effect_residuals(&self, x: &[f64], r: &mut [f64]) -> Result<(), String> {
         let model = self.effects_model(x)?;
         let mut k = 0;
-        for (s, rows) in self.series.iter().zip(&self.rows) {
+        for ((s, rows), st) in self.series.iter().zip(&self.rows).zip(&self.states) {
             let want: std::collections::HashSet<usize> = rows.iter().copied().collect();
-            let preds = model.predict_where(s, &|i| want.contains(&i));
+            let how = crate::model::Solving {
+                states: Some(st),
+                ..Default::default()
+            };
+            let preds = model.predict_where_from(s, &|i| want.contains(&i), how);
             for &i in rows {
                 let (Some(m), Some(p)) = (s.samples[i].pose, preds[i].pose) else {
                     r[3 * k] = 0.0;
@@ -533,6 +541,7 @@ pub(crate) fn refine_with_errors(
         n,
         w_phi,
         nuisance,
+        states: series.iter().map(|_| Default::default()).collect(),
     };
     // A relative cost change of 1e-6 is a change of chi^2 of about 0.01 on 3000 rows (three
     // coordinates each, at the noise): it moves no parameter by a tenth of its error, and the

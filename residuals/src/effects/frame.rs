@@ -23,6 +23,17 @@ pub const FRAME_SCALE: f64 = 1.0;
 /// calibration's own poses show is a frame error whatever its size, up to this.
 pub const CONFIRMED_FRAME_SCALE: f64 = 10.0;
 
+/// How far beyond a plausible registration error the capture frame of `effects` is: the larger
+/// of its offset over `max_change` mm and its rotation over a third of it in degrees (as
+/// [`Effect::unphysical`] judges them at [`FRAME_SCALE`]); above 1 it is unphysical unless the
+/// static poses confirm it, 0 without a frame.
+pub fn excess(effects: &Effects, max_change: f64) -> f64 {
+    effects.frame.as_ref().map_or(0.0, |f| {
+        let (mm, deg) = (FRAME_SCALE * max_change, FRAME_SCALE * max_change / 3.0);
+        (f.dx_mm.hypot(f.dy_mm) / mm).max(f.dphi_deg.abs() / deg)
+    })
+}
+
 /// The `frame` candidate.
 #[derive(Debug)]
 pub struct Frame;
