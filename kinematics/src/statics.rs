@@ -1335,6 +1335,16 @@ mod tests {
         }
     }
 
+    /// The sweep's test strengths: a load of (0.4, -0.3) N and springs of 300 / 200 N mm/rad.
+    fn springs_and_load() -> Loads {
+        Loads {
+            force: [0.4, -0.3],
+            k_m: 300.0,
+            k_p: 200.0,
+            ..unloaded()
+        }
+    }
+
     fn unloaded() -> Loads {
         Loads {
             ei: 6.5e4,
@@ -1444,12 +1454,7 @@ mod tests {
     #[test]
     fn warm_started_loaded_fk_finds_the_cold_equilibrium_along_a_path() {
         let r = Robot::nominal();
-        let loads = Loads {
-            force: [0.4, -0.3],
-            k_m: 300.0,
-            k_p: 200.0,
-            ..unloaded()
-        };
+        let loads = springs_and_load();
         let mut warm = LoadedWarm::default();
         for k in 0..=60 {
             // Along a line, back at the end (a reversal), then a jump across the workspace.
@@ -1486,12 +1491,7 @@ mod tests {
     #[test]
     fn a_solve_resumed_from_nearby_loads_finds_the_cold_equilibrium() {
         let r = Robot::nominal();
-        let loads = Loads {
-            force: [0.4, -0.3],
-            k_m: 300.0,
-            k_p: 200.0,
-            ..unloaded()
-        };
+        let loads = springs_and_load();
         let target = Pose::from_mm_deg(10.0, -5.0, 3.0);
         let kappa = r.ik(&target).unwrap().kappa;
         let mut first = LoadedWarm::default();

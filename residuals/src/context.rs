@@ -654,6 +654,25 @@ mod tests {
     use super::*;
     use pcr_robot::RobotConfig;
 
+    /// A recording of `n` rows 20 ms apart of the nominal robot: the motors at `q(k, t, home)`,
+    /// measured at `pose(t)`.
+    fn series_of(
+        n: usize,
+        q: impl Fn(usize, f64, &[f64; 3]) -> [i32; 3],
+        pose: impl Fn(f64) -> [Option<f64>; 3],
+    ) -> Vec<Series> {
+        let robot = pcr_kinematics::Robot::new(&RobotConfig::nominal()).unwrap();
+        let home = robot.home_motor_steps();
+        let mut rec = pcr_recording::Recording::default();
+        for k in 0..n {
+            let t = k as f64 * 0.02;
+            let mut r = pcr_recording::Row::new(t, q(k, t, &home));
+            r.pose = pose(t);
+            rec.rows.push(r);
+        }
+        vec![Series::from_recording(&rec, "t").unwrap()]
+    }
+
     /// The acceptance compares the training error of a context made on every fourth training
     /// row ([`Context::training`]) with that of a full context cut down to the same rows
     /// ([`Context::training_subset`]): both must hold the same
@@ -661,24 +680,22 @@ mod tests {
     #[test]
     fn a_training_context_on_every_fourth_row_is_the_full_context_cut_down() {
         let cfg = RobotConfig::nominal();
-        let robot = pcr_kinematics::Robot::new(&cfg).unwrap();
-        let home = robot.home_motor_steps();
-        let mut rec = pcr_recording::Recording::default();
-        for k in 0..403 {
-            let t = k as f64 * 0.02;
-            let q: [i32; 3] = std::array::from_fn(|i| {
-                (home[i] + 60.0 * (0.7 * t + i as f64).sin()).round() as i32
-            });
-            let mut r = pcr_recording::Row::new(t, q);
+        let series = series_of(
+            403,
+            |_, t, home| {
+                std::array::from_fn(|i| {
+                    (home[i] + 60.0 * (0.7 * t + i as f64).sin()).round() as i32
+                })
+            },
             // Measured poses a little off the model's, so that every residual differs.
-            r.pose = [
-                Some(0.1 * (3.0 * t).sin()),
-                Some(0.05 * t),
-                Some(0.001 * (5.0 * t).cos()),
-            ];
-            rec.rows.push(r);
-        }
-        let series = vec![Series::from_recording(&rec, "t").unwrap()];
+            |t| {
+                [
+                    Some(0.1 * (3.0 * t).sin()),
+                    Some(0.05 * t),
+                    Some(0.001 * (5.0 * t).cos()),
+                ]
+            },
+        );
         let blocks = Blocks::in_time(&series, 1.0, 3);
         assert!(blocks.held_out.iter().any(|&h| h));
         let model = ExtendedModel::new(&cfg, crate::effects::chain()).unwrap();
@@ -709,22 +726,18 @@ mod tests {
     #[test]
     fn a_context_that_cannot_hold_enough_rows_stops_predicting() {
         let cfg = RobotConfig::nominal();
-        let robot = pcr_kinematics::Robot::new(&cfg).unwrap();
-        let home = robot.home_motor_steps();
-        let mut rec = pcr_recording::Recording::default();
         // 100 rows the robot cannot reach (the motors far beyond any curvature the legs take),
         // then 100 it can.
-        for k in 0..200 {
-            let t = k as f64 * 0.02;
-            let far = if k < 100 { 1e7 } else { 0.0 };
-            let q: [i32; 3] = std::array::from_fn(|i| {
-                (home[i] + far + 40.0 * (0.7 * t + i as f64).sin()).round() as i32
-            });
-            let mut r = pcr_recording::Row::new(t, q);
-            r.pose = [Some(0.0), Some(0.0), Some(0.0)];
-            rec.rows.push(r);
-        }
-        let series = vec![Series::from_recording(&rec, "t").unwrap()];
+        let series = series_of(
+            200,
+            |k, t, home| {
+                let far = if k < 100 { 1e7 } else { 0.0 };
+                std::array::from_fn(|i| {
+                    (home[i] + far + 40.0 * (0.7 * t + i as f64).sin()).round() as i32
+                })
+            },
+            |_| [Some(0.0); 3],
+        );
         let blocks = Blocks::in_time(&series, 1.0, 3);
         let model = ExtendedModel::new(&cfg, crate::effects::chain()).unwrap();
         let full = Context::new(&series, model.clone(), &blocks, 50.0);
