@@ -147,6 +147,45 @@ impl Segment {
             arc,
         }
     }
+
+    /// The elastica under the tip force `f` (leg's local frame, N) with its base curvature
+    /// `u0` (1/mm) above the arc's: the tip's displacement from the arc's tip (local frame, mm)
+    /// and the change of the total bending theta(l_C) - theta(0) (rad). Bit for bit the lane of
+    /// [`deflect3`] that integrates it (a test holds it).
+    pub(crate) fn deflect(&self, ei: f64, f: Vec2, u0: f64) -> [f64; 3] {
+        let (fx, fy) = (f[0] / ei, f[1] / ei);
+        // State: delta = theta - theta_arc, u = delta', and the displacement (which does not
+        // feed back). (cos, sin) of delta are carried from step to step and turned by each
+        // stage's increment of delta (short series: no transcendental call on the way).
+        // The right-hand side at arc node `a` with (cos, sin) delta = `e`.
+        let rhs = |a: [f64; 2], e: [f64; 2], u: f64| -> [f64; 4] {
+            let c = a[0] * e[0] - a[1] * e[1];
+            let s = a[1] * e[0] + a[0] * e[1];
+            [u, s * fx - c * fy, c - a[0], s - a[1]]
+        };
+        let turn = |e: [f64; 2], x: f64| -> [f64; 2] {
+            let (s, c) = sin_cos_small(x);
+            [e[0] * c - e[1] * s, e[1] * c + e[0] * s]
+        };
+        let h = self.h;
+        let (mut d, mut u, mut x, mut y) = (0.0, u0, 0.0, 0.0);
+        let mut e = [1.0, 0.0];
+        for j in 0..STEPS {
+            let (a0, am, a1) = (self.arc[2 * j], self.arc[2 * j + 1], self.arc[2 * j + 2]);
+            let k1 = rhs(a0, e, u);
+            let k2 = rhs(am, turn(e, 0.5 * h * k1[0]), u + 0.5 * h * k1[1]);
+            let k3 = rhs(am, turn(e, 0.5 * h * k2[0]), u + 0.5 * h * k2[1]);
+            let k4 = rhs(a1, turn(e, h * k3[0]), u + h * k3[1]);
+            let w = h / 6.0;
+            let dd = w * (k1[0] + 2.0 * (k2[0] + k3[0]) + k4[0]);
+            d += dd;
+            e = turn(e, dd);
+            u += w * (k1[1] + 2.0 * (k2[1] + k3[1]) + k4[1]);
+            x += w * (k1[2] + 2.0 * (k2[2] + k3[2]) + k4[2]);
+            y += w * (k1[3] + 2.0 * (k2[3] + k3[3]) + k4[3]);
+        }
+        [x, y, d]
+    }
 }
 
 /// The elastica of the three segments under their tip forces `f` (leg's local frame, N) with
@@ -812,7 +851,7 @@ impl Robot {
         // residual as a whole evaluation, bit for bit).
         let (sp, cp) = z[2].sin_cos();
         let base: [LegTerms; 3] = std::array::from_fn(|i| {
-            let mut t = self.leg_terms(i, setup, loads, z, sp, cp);
+            let mut t = self.leg_terms(i, &setup.seg[i], setup.rest[i], loads, z, sp, cp);
             t.out = segs.linear(i, &t.input);
             t
         });
@@ -831,7 +870,7 @@ impl Robot {
             let (sp, cp) = if k == 2 { zp[2].sin_cos() } else { (sp, cp) };
             for (i, t) in terms.iter_mut().enumerate() {
                 if leg.is_none_or(|l| l == i) {
-                    *t = self.leg_terms(i, setup, loads, &zp, sp, cp);
+                    *t = self.leg_terms(i, &setup.seg[i], setup.rest[i], loads, &zp, sp, cp);
                     t.out = segs.linear(i, &t.input);
                 }
             }
@@ -877,9 +916,28 @@ impl Robot {
         z: &VN,
         mode: SegmentMode,
     ) -> Evaluation {
+        let (res, terms, lin) = self.loaded_terms(st, loads, z, mode);
+        Evaluation {
+            res,
+            input: std::array::from_fn(|i| terms[i].input),
+            out: std::array::from_fn(|i| terms[i].out),
+            lin,
+        }
+    }
+
+    /// [`Robot::loaded_eval`]'s residual with the legs' shares it was assembled from and the
+    /// segments' derivatives ([`SegmentMode::Variational`] only).
+    #[allow(clippy::type_complexity)]
+    fn loaded_terms(
+        &self,
+        st: &LoadedSetup,
+        loads: &Loads,
+        z: &VN,
+        mode: SegmentMode,
+    ) -> (VN, [LegTerms; 3], [[[f64; 3]; 3]; 3]) {
         let (sp, cp) = z[2].sin_cos();
         let mut terms: [LegTerms; 3] =
-            std::array::from_fn(|i| self.leg_terms(i, st, loads, z, sp, cp));
+            std::array::from_fn(|i| self.leg_terms(i, &st.seg[i], st.rest[i], loads, z, sp, cp));
         let mut lins = [[[0.0; 3]; 3]; 3];
         match mode {
             SegmentMode::Exact => {
@@ -905,20 +963,17 @@ impl Robot {
                 }
             }
         }
-        Evaluation {
-            res: self.assemble(loads, z, &terms),
-            input: std::array::from_fn(|i| terms[i].input),
-            out: std::array::from_fn(|i| terms[i].out),
-            lin: lins,
-        }
+        (self.assemble(loads, z, &terms), terms, lins)
     }
 
     /// Leg i's share of the residual at `z` (`sp`, `cp` the sine and cosine of its phi), its
     /// segment's output not yet filled in.
+    #[allow(clippy::too_many_arguments)]
     fn leg_terms(
         &self,
         i: usize,
-        st: &LoadedSetup,
+        sg: &Segment,
+        rest: (f64, f64),
         loads: &Loads,
         z: &VN,
         sp: f64,
@@ -926,7 +981,6 @@ impl Robot {
     ) -> LegTerms {
         let springs = loads.k_m != 0.0 || loads.k_p != 0.0;
         let leg = &self.legs[i];
-        let sg = &st.seg[i];
         let m = [sg.m0[0] + z[6 + 2 * i], sg.m0[1] + z[7 + 2 * i]];
         // P_i - E and P_i (geometry.md eq. 5).
         let pe = [
@@ -941,8 +995,8 @@ impl Robot {
         let (tau, zeta_k) = if springs {
             let gamma = g::signed_angle(sg.t, d);
             let zeta = g::signed_angle(pe, g::sub(m, p));
-            let zk = loads.k_p * (zeta - st.rest[i].1);
-            (-loads.k_m * (gamma - st.rest[i].0) - zk, zk)
+            let zk = loads.k_p * (zeta - rest.1);
+            (-loads.k_m * (gamma - rest.0) - zk, zk)
         } else {
             (0.0, 0.0)
         };
@@ -1068,15 +1122,20 @@ impl Robot {
         } = self.linearised_warm(kappa, loads, guess, warm)?;
         let d_loads = self.load_columns(&st, loads, &z, &segs, &f0, &lu)?;
         // The curvatures change the segments themselves: their residual is integrated again
-        // (the same fixed-step integration, smooth in the curvature).
-        let exact = self.loaded_eval(&st, loads, &z, SegmentMode::Exact).res;
+        // (the same fixed-step integration, smooth in the curvature). Leg i's curvature
+        // changes its segment alone: the other legs' shares are those at `z`, and its segment
+        // is integrated alone (bit for bit its lane of the three).
+        let (exact, terms, _) = self.loaded_terms(&st, loads, &z, SegmentMode::Exact);
+        let (sp, cp) = z[2].sin_cos();
         let mut d_kappa = [[0.0; 3]; 3];
         for (i, col) in d_kappa.iter_mut().enumerate() {
             let h = 1e-7 * kappa[i].abs().max(1e-3);
-            let mut kp = *kappa;
-            kp[i] += h;
-            let stp = self.loaded_setup_at_rest(&kp, rest);
-            let ft = (self.loaded_eval(&stp, loads, &z, SegmentMode::Exact).res - exact) / h;
+            let seg = Segment::new(&self.legs[i], kappa[i] + h);
+            let mut t = terms;
+            t[i] = self.leg_terms(i, &seg, rest[i], loads, &z, sp, cp);
+            let input = t[i].input;
+            t[i].out = seg.deflect(loads.ei, [input[0], input[1]], input[2]);
+            let ft = (self.assemble(loads, &z, &t) - exact) / h;
             let dz = lu
                 .solve(&(-ft))
                 .ok_or(FkError::NoSolution { reached: 0.0 })?;
@@ -1222,47 +1281,10 @@ impl Robot {
 mod tests {
     use super::*;
 
-    // The reference integrations of one segment the solver's lockstep ones (deflect3,
-    // deflect_jac3) are held to, bit for bit: the same operations, one segment at a time.
+    // The reference integration of one segment with its derivatives the solver's lockstep one
+    // (deflect_jac3) is held to, bit for bit: the same operations, one segment at a time
+    // ([`Segment::deflect`] is the solver's own, for one segment).
     impl Segment {
-        /// The elastica under the tip force `f` (leg's local frame, N) with its base curvature
-        /// `u0` (1/mm) above the arc's: the tip's displacement from the arc's tip (local frame, mm)
-        /// and the change of the total bending theta(l_C) - theta(0) (rad).
-        fn deflect(&self, ei: f64, f: Vec2, u0: f64) -> [f64; 3] {
-            let (fx, fy) = (f[0] / ei, f[1] / ei);
-            // State: delta = theta - theta_arc, u = delta', and the displacement (which does not
-            // feed back). (cos, sin) of delta are carried from step to step and turned by each
-            // stage's increment of delta (short series: no transcendental call on the way).
-            // The right-hand side at arc node `a` with (cos, sin) delta = `e`.
-            let rhs = |a: [f64; 2], e: [f64; 2], u: f64| -> [f64; 4] {
-                let c = a[0] * e[0] - a[1] * e[1];
-                let s = a[1] * e[0] + a[0] * e[1];
-                [u, s * fx - c * fy, c - a[0], s - a[1]]
-            };
-            let turn = |e: [f64; 2], x: f64| -> [f64; 2] {
-                let (s, c) = sin_cos_small(x);
-                [e[0] * c - e[1] * s, e[1] * c + e[0] * s]
-            };
-            let h = self.h;
-            let (mut d, mut u, mut x, mut y) = (0.0, u0, 0.0, 0.0);
-            let mut e = [1.0, 0.0];
-            for j in 0..STEPS {
-                let (a0, am, a1) = (self.arc[2 * j], self.arc[2 * j + 1], self.arc[2 * j + 2]);
-                let k1 = rhs(a0, e, u);
-                let k2 = rhs(am, turn(e, 0.5 * h * k1[0]), u + 0.5 * h * k1[1]);
-                let k3 = rhs(am, turn(e, 0.5 * h * k2[0]), u + 0.5 * h * k2[1]);
-                let k4 = rhs(a1, turn(e, h * k3[0]), u + h * k3[1]);
-                let w = h / 6.0;
-                let dd = w * (k1[0] + 2.0 * (k2[0] + k3[0]) + k4[0]);
-                d += dd;
-                e = turn(e, dd);
-                u += w * (k1[1] + 2.0 * (k2[1] + k3[1]) + k4[1]);
-                x += w * (k1[2] + 2.0 * (k2[2] + k3[2]) + k4[2]);
-                y += w * (k1[3] + 2.0 * (k2[3] + k3[3]) + k4[3]);
-            }
-            [x, y, d]
-        }
-
         /// [`Segment::deflect`] with its derivatives `jac[o][k] = d out_o / d (f_x, f_y, u0)_k`: the
         /// variational equations of the elastica integrated alongside, stage by stage, so that they
         /// are the exact derivatives of the discrete integration (`out` is bit-for-bit
