@@ -638,25 +638,24 @@ impl<'a> Search<'a> {
             &set.opts.progress,
         )
         .ok_or_else(|| "the full model does not lower the training error".to_string())?;
-        let (config, ctx, bad) = match from_drawing(config, ctx, set) {
-            Ok((config, ctx)) => {
-                let limit = set.opts.max_geometry_change;
-                let bad = effects_unphysical_unless_confirmed(&config, limit, &ctx, set);
-                (config, Some(ctx), bad)
-            }
-            Err(kept) => {
-                let (config, bad) = *kept;
-                (config, None, bad)
-            }
-        };
-        let leaves = leaves_drawing(&config, &self.config, set.drawing, set.opts);
-        if !bad.is_empty() {
+        let unphysical = |config: &RobotConfig, bad: Vec<String>| {
+            let leaves = leaves_drawing(config, &self.config, set.drawing, set.opts);
             let all: Vec<String> = leaves.into_iter().chain(bad).collect();
-            return Err(format!("unphysical: {}", all.join(", ")));
-        }
-        let Some(ctx) = ctx else {
-            return Err("unphysical".to_string());
+            format!("unphysical: {}", all.join(", "))
         };
+        let (config, ctx) = match from_drawing(config, ctx, set) {
+            Ok(kept) => kept,
+            Err(refused) => {
+                let (config, bad) = *refused;
+                return Err(unphysical(&config, bad));
+            }
+        };
+        let limit = set.opts.max_geometry_change;
+        let bad = effects_unphysical_unless_confirmed(&config, limit, &ctx, set);
+        if !bad.is_empty() {
+            return Err(unphysical(&config, bad));
+        }
+        let leaves = leaves_drawing(&config, &self.config, set.drawing, set.opts);
         // A geometry that leaves the drawing with the effect in may be an effect not yet in the
         // model that is in the static poses (a creep beside a drift): the effect is taken in
         // provisionally, and the search judges the geometry once the others are in

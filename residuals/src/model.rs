@@ -192,8 +192,8 @@ impl ExtendedModel {
 
     /// [`ExtendedModel::predict_where`] solved as `how` says: a loaded row solved in sequence
     /// (not interpolated) started from the state `how.states` keeps for it from an earlier
-    /// prediction (of a nearby model), and its state kept there; the rows left unsolved once a
-    /// wanted row fails, with `how.stop`.
+    /// prediction (of a nearby model), and its state kept there; the rows not yet solved left
+    /// unsolved once more wanted rows have failed than `how.failures` allows.
     pub fn predict_where_from(
         &self,
         s: &Series,
