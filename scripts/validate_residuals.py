@@ -16,7 +16,8 @@ plant seed it
      each row's q is the command of the row before, no `command_delay_s` declaration);
   4. runs `pcr residuals --data cal.csv --holdout holdout.csv --json ...` on both conventions,
      pinned to one core (`taskset -c`), timing wall and cpu (and once more on two cores for the
-     chain's convention of the first seed);
+     chain's convention of the first seed); with several jobs, a run over the time budget is
+     timed again at the end, alone, pinned, with the other cores idle;
   5. compares what was named with the truth: per parameter the estimate, its stated standard
      error, |est - truth| / std; the held-out RMS after the analysis against the floor, the
      held-out RMS of the noisy holdout against its noise-free twin (the capture noise as it fell
@@ -456,7 +457,10 @@ class Sweep:
         (d / "plant.stamp").write_text(stamp)
         return None
 
-    def analyse(self, case, seed, core, two_cores: bool):
+    def analyse(self, case, seed, core, two_cores: bool, alone: bool = False):
+        """Analyses the case's recordings for `seed` in both conventions (pinned to `core`);
+        with `alone`, the timings of the first pass are read back and a run over the time
+        budget is timed again, pinned, while nothing else runs (`Sweep.run`)."""
         d = self.case_dir(case) / ("s%d" % seed)
         for n in ("cal", "holdout"):
             if not (d / (n + "-reached.csv")).exists():
@@ -470,8 +474,13 @@ class Sweep:
             cmd = [self.pcr, "residuals", "--robot", str(ROOT / "configs/robot.toml"),
                    "--data", str(d / ("cal%s.csv" % suffix)),
                    "--holdout", str(d / ("holdout%s.csv" % suffix)), "--json", str(js)]
-            if self.a.reuse and js.exists() and (d / ("time-%s.json" % conv)).exists():
+            if (self.a.reuse or alone) and js.exists() and (d / ("time-%s.json" % conv)).exists():
                 t = json.loads((d / ("time-%s.json" % conv)).read_text())
+                if alone and over_budget(t, self.a) and t.get("cpu_alone_s") is None:
+                    rc, wall, cpu, _ = run_timed(cmd, d, log, core)
+                    if rc == 0:
+                        t["cpu_alone_s"], t["wall_alone_s"] = cpu, wall
+                        (d / ("time-%s.json" % conv)).write_text(json.dumps(t))
             else:
                 js.unlink(missing_ok=True)
                 rc, wall, cpu, peak = run_timed(cmd, d, log, core)
@@ -549,7 +558,32 @@ class Sweep:
                 futs = [pool.submit(self.task, c, s) for c in case_list for s in seeds]
                 for f in futs:
                     runs.extend(f.result())
+        if self.a.jobs > 1 and self.a.time_budget_s > 0:
+            runs = self.retime_alone(case_list, runs)
         return runs
+
+    def retime_alone(self, case_list, runs):
+        """Times the runs that went over the budget beside another job again, one at a time,
+        pinned to one core with the other cores idle: two analyses at a time share the caches
+        and the memory bus (20-30 % on one case), and the budget is the time of one core. Both
+        figures are reported; the time rule reads this one."""
+        over = [(r["case"], r["seed"]) for r in runs
+                if r["cpu_s"] is not None and r["cpu_s"] > self.a.time_budget_s]
+        over = list(dict.fromkeys(over))
+        if not over:
+            return runs
+        self.say("timing %d case(s) over %.0f s again, one at a time" % (
+            len(over), self.a.time_budget_s))
+        by_id = {c.id: c for c in case_list}
+        core = Cores(1).take()
+        redone = {}
+        for cid, seed in over:
+            for r in self.analyse(by_id[cid], seed, core, False, alone=True):
+                redone[(cid, seed, r["convention"])] = r
+                self.say("%-44s s%d %-7s %-6s alone: %s s cpu" % (
+                    cid, seed, r["convention"], "ok" if not r["failures"] else "FAIL",
+                    fmt(r.get("cpu_alone_s"), "%.1f")))
+        return [redone.get((r["case"], r["seed"], r["convention"]), r) for r in runs]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -573,7 +607,8 @@ def failed_run(case, seed, conv, factors, err):
             "truth": truth_text(case, factors), "named": [], "recalibrations": [],
             "params": [], "after_mm": None, "before_mm": None, "floor_mm": None,
             "after_floor": None, "noise_floor_mm": None, "verdict": None, "wall_s": None,
-            "cpu_s": None, "wall2_s": None, "peak_mib": None, "rows": [None, None],
+            "cpu_s": None, "wall2_s": None, "cpu_alone_s": None, "peak_mib": None,
+            "rows": [None, None],
             "failures": ["error: " + err], "summary": "error: " + err, "detected": {},
             "factors": factors}
 
@@ -584,9 +619,18 @@ def truth_text(case, factors):
     return "; ".join("%s %s" % (e, EFFECTS[e].describe(factors[e])) for e, _ in case.effects)
 
 
+def over_budget(t, args) -> bool:
+    """Whether a run's cpu time on one core is over the time budget: the time it took alone
+    where it was timed again alone, else its time in the sweep."""
+    cpu = t.get("cpu_alone_s")
+    cpu = t.get("cpu_s") if cpu is None else cpu
+    return args.time_budget_s > 0 and cpu is not None and cpu > args.time_budget_s
+
+
 def evaluate(case, seed, conv, factors, res, t, floor, rows, err, args):
     run = failed_run(case, seed, conv, factors, err or "analysis failed")
     run.update({"wall_s": t["wall_s"], "cpu_s": t["cpu_s"], "wall2_s": t.get("wall2_s"),
+                "cpu_alone_s": t.get("cpu_alone_s"),
                 "peak_mib": t["peak_mib"], "rows": rows, "floor_mm": floor})
     if res is None:
         return run
@@ -634,10 +678,14 @@ def evaluate(case, seed, conv, factors, res, t, floor, rows, err, args):
             run["after_floor"] > args.max_after_floor:
         failures.append("after/floor %.2f" % run["after_floor"])
     # The time on one core: the cpu time of the pinned run (its wall time also counts the
-    # other jobs of a shared machine), for the full-size recordings (40k + 16k rows).
-    if args.time_budget_s > 0 and t["cpu_s"] is not None and t["cpu_s"] > args.time_budget_s and (
-            case.full_size or args.size == "full"):
-        failures.append("%.1f s cpu on one core" % t["cpu_s"])
+    # other jobs of a shared machine), timed again alone where it went over beside another job
+    # (`Sweep.retime_alone`), for the full-size recordings (40k + 16k rows).
+    if over_budget(t, args) and (case.full_size or args.size == "full"):
+        if t.get("cpu_alone_s") is not None:
+            failures.append("%.1f s cpu on one core (alone; %.1f s beside another job)" % (
+                t["cpu_alone_s"], t["cpu_s"]))
+        else:
+            failures.append("%.1f s cpu on one core" % t["cpu_s"])
     run["failures"] = failures
     run["summary"] = "%s; named %s%s%s; after/floor %s" % (
         run["verdict"], ", ".join(physical) or "nothing",
@@ -742,6 +790,9 @@ def aggregate(case_list, runs, factors, notes):
         ratios = [r["after_floor"] for r in rs if r["after_floor"] is not None]
         walls = [r["wall_s"] for r in rs if r["wall_s"] is not None]
         cpus = [r["cpu_s"] for r in rs if r["cpu_s"] is not None]
+        # The time each run is judged on: alone where it was timed again alone.
+        judged = [r["cpu_alone_s"] if r.get("cpu_alone_s") is not None else r["cpu_s"]
+                  for r in rs if r["cpu_s"] is not None]
         wall2 = [r["wall2_s"] for r in rs if r.get("wall2_s") is not None]
         by_seed = {}
         for r in rs:
@@ -762,6 +813,7 @@ def aggregate(case_list, runs, factors, notes):
             "after_floor_median": statistics.median(ratios) if ratios else None,
             "after_floor_max": max(ratios) if ratios else None,
             "wall_max_s": max(walls) if walls else None, "cpu_max_s": max(cpus) if cpus else None,
+            "cpu_judged_max_s": max(judged) if judged else None,
             "wall2_max_s": max(wall2) if wall2 else None,
             "rows": rs[0]["rows"],
             "conventions_agree": "%d/%d" % (agree, len(by_seed)) + (
@@ -809,7 +861,9 @@ def markdown(case_list, runs, aggs, limits, args, meta):
     L.append("Floor: the held-out RMS of the noisy holdout against its noise-free twin (the "
              "capture noise as it fell on the held-out rows). Coverage: runs with |est - truth| "
              "<= 2 stated std. Times: `pcr residuals` (calibration + analysis) pinned to one core "
-             "(`taskset`), wall; two cores: the chain convention of the first seed, unpinned. Bias and "
+             "(`taskset`), wall, beside another job when the sweep runs two at a time; [cpu alone]: a run "
+             "over the time budget timed again pinned with the other cores idle (the time rule "
+             "reads it); two cores: the chain convention of the first seed, unpinned. Bias and "
              "spread of a parameter: over the seeds, chain convention; conventions agree: seeds "
              "where both name the same effects, and the largest difference of a parameter "
              "between them in its stated std.\n")
@@ -825,7 +879,7 @@ def markdown(case_list, runs, aggs, limits, args, meta):
     L.append("## Per case (aggregated over seeds and both conventions)\n")
     L.append("| case | truth | runs passing | detected | named, not in the data | parameter: bias +- spread "
              "over seeds (median stated std) [runs covered] | after/floor median (max) | verdicts | conventions agree | "
-             "max wall 1 core / cpu (s) | wall 2 cores (s) | note |")
+             "max wall 1 core / cpu (s) [cpu alone] | wall 2 cores (s) | note |")
     L.append("|---|---|---:|---|---|---|---|---|---|---|---|---|")
     for a in aggs:
         if not a["n"]:
@@ -842,12 +896,15 @@ def markdown(case_list, runs, aggs, limits, args, meta):
             a["case"], a["truth"], a["passed"], a["n"], det, false, ps,
             fmt(a["after_floor_median"], "%.2f"), fmt(a["after_floor_max"], "%.2f"),
             ", ".join(a["verdicts"]), a["conventions_agree"], fmt(a["wall_max_s"], "%.1f"),
-            fmt(a["cpu_max_s"], "%.1f"), fmt(a["wall2_max_s"], "%.1f"), a["note"]))
+            fmt(a["cpu_max_s"], "%.1f") + (
+                " [%s]" % fmt(a["cpu_judged_max_s"], "%.1f")
+                if a.get("cpu_judged_max_s") != a["cpu_max_s"] else ""),
+            fmt(a["wall2_max_s"], "%.1f"), a["note"]))
     L.append("")
     L.append("## Per run\n")
     L.append("| case | seed | convention | rows (cal + holdout) | named (+ recalibrations) | parameters: est +- std "
              "(truth) \\|est - truth\\|/std | before / after / floor (mm) | after/floor | verdict | "
-             "wall / cpu 1 core (s) | failures |")
+             "wall / cpu 1 core (s) [cpu alone] | failures |")
     L.append("|---|---:|---|---|---|---|---|---:|---|---|---|")
     for r in runs:
         ps = "<br>".join("%s %s: %s +- %s (%s) %s" % (
@@ -860,7 +917,9 @@ def markdown(case_list, runs, aggs, limits, args, meta):
             r["case"], r["seed"], r["convention"], r["rows"][0], r["rows"][1], named, ps,
             fmt(r["before_mm"], "%.3f"), fmt(r["after_mm"], "%.3f"), fmt(r["floor_mm"], "%.4f"),
             fmt(r["after_floor"], "%.2f"), r["verdict"], fmt(r["wall_s"], "%.1f"),
-            fmt(r["cpu_s"], "%.1f"), "; ".join(r["failures"]) or "-"))
+            fmt(r["cpu_s"], "%.1f") + (
+                " [%s]" % fmt(r["cpu_alone_s"], "%.1f") if r.get("cpu_alone_s") is not None else ""),
+            "; ".join(r["failures"]) or "-"))
     L.append("")
     return "\n".join(L)
 
@@ -872,13 +931,13 @@ def write_csv(path, runs):
                     "named", "recalibrations", "effect", "param", "truth_value", "estimate",
                     "std", "abs_err_over_std", "before_mm", "after_mm", "floor_mm",
                     "after_over_floor", "noise_floor_mm", "verdict", "wall_1core_s",
-                    "cpu_1core_s", "wall_2cores_s", "peak_mib", "failures"])
+                    "cpu_1core_s", "wall_2cores_s", "cpu_1core_alone_s", "peak_mib", "failures"])
         for r in runs:
             base = [r["case"], r["kind"], r["seed"], r["convention"], r["truth"], r["rows"][0],
                     r["rows"][1], " ".join(r["named"]), " ".join(r["recalibrations"])]
             tail = [r["before_mm"], r["after_mm"], r["floor_mm"], r["after_floor"],
                     r["noise_floor_mm"], r["verdict"], r["wall_s"], r["cpu_s"], r["wall2_s"],
-                    r["peak_mib"], "; ".join(r["failures"])]
+                    r.get("cpu_alone_s"), r["peak_mib"], "; ".join(r["failures"])]
             if not r["params"]:
                 w.writerow(base + ["", "", "", "", "", ""] + tail)
             for p in r["params"]:
