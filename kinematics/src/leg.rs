@@ -34,6 +34,23 @@ pub struct Leg {
     pub map: TendonMap,
 }
 
+impl Leg {
+    /// Whether `other` has the same drawing: every field the kinematics and statics read
+    /// besides the tendon map and the drive (base point, orientation, lengths, platform joint),
+    /// compared exactly. Two legs of the same drawing at the same curvature have the same
+    /// segment, joint and tangent.
+    pub fn same_drawing(&self, other: &Leg) -> bool {
+        self.b == other.b
+            && self.psi == other.psi
+            && self.cos_psi == other.cos_psi
+            && self.sin_psi == other.sin_psi
+            && self.l_c == other.l_c
+            && self.l_ce == other.l_ce
+            && self.l_st == other.l_st
+            && self.p_e == other.p_e
+    }
+}
+
 /// Position and first derivative of the joint M_i, with the tip tangent, in the leg's local frame.
 #[derive(Debug, Clone, Copy)]
 pub struct LocalTip {

@@ -1156,7 +1156,73 @@ impl Robot {
     /// other robot's residual at this equilibrium, through this one's factored Jacobian. What
     /// a fit of calibration parameters around a loaded model needs of each row, without an
     /// equilibrium solved per parameter.
+    ///
+    /// The other robot's residual is assembled leg by leg: a leg with this one's drawing,
+    /// curvature and rest angles keeps its share at `z`; a leg whose segment is this one's (the
+    /// same length and curvature: the integration reads nothing else) but whose share changes
+    /// (its base, its platform joint, or its rest angles, which move with every leg's drawing
+    /// under springs) takes the segment's linearisation at `z` for its new tip load (exact to
+    /// first order in the step, as the difference quotient itself is); only a leg whose length
+    /// or curvature changes is integrated again. A direction of the drawing then integrates
+    /// one segment or none, where it integrated three.
     pub fn loaded_directions_warm(
+        &self,
+        kappa: &[f64; 3],
+        loads: &Loads,
+        guess: &Pose,
+        warm: &mut LoadedWarm,
+        directions: &[Direction<'_>],
+        out: &mut [[f64; 3]],
+    ) -> Result<Pose, FkError> {
+        let Linearised {
+            rest,
+            st,
+            z,
+            segs,
+            lu,
+            ..
+        } = self.linearised_warm(kappa, loads, guess, warm)?;
+        let (exact, terms, _) = self.loaded_terms(&st, loads, &z, SegmentMode::Exact);
+        let (sp, cp) = z[2].sin_cos();
+        // Without springs the rest angles are not read.
+        let springs = loads.k_m != 0.0 || loads.k_p != 0.0;
+        for (d, o) in directions.iter().zip(out.iter_mut()) {
+            let mut t = terms;
+            for (i, ti) in t.iter_mut().enumerate() {
+                let (leg, other) = (&self.legs[i], &d.robot.legs[i]);
+                let drawing = leg.same_drawing(other);
+                let curvature = d.kappa[i] == kappa[i];
+                if drawing && curvature && (d.rest[i] == rest[i] || !springs) {
+                    continue;
+                }
+                let seg = if drawing && curvature {
+                    None
+                } else {
+                    Some(Segment::new(other, d.kappa[i]))
+                };
+                let sg = seg.as_ref().unwrap_or(&st.seg[i]);
+                *ti = d.robot.leg_terms(i, sg, d.rest[i], loads, &z, sp, cp);
+                let input = ti.input;
+                ti.out = if leg.l_c == other.l_c && curvature {
+                    segs.linear(i, &input)
+                } else {
+                    sg.deflect(loads.ei, [input[0], input[1]], input[2])
+                };
+            }
+            let ft = (d.robot.assemble(loads, &z, &t) - exact) / d.step;
+            let dz = lu
+                .solve(&(-ft))
+                .ok_or(FkError::NoSolution { reached: 0.0 })?;
+            *o = [dz[0], dz[1], dz[2]];
+        }
+        Ok(Pose::new(z[0], z[1], z[2]))
+    }
+
+    /// [`Robot::loaded_directions_warm`] as it was before its legs were assembled one by one:
+    /// every direction's residual evaluated whole, its three segments integrated (the
+    /// reference its tests compare with).
+    #[cfg(test)]
+    fn loaded_directions_whole(
         &self,
         kappa: &[f64; 3],
         loads: &Loads,
@@ -1622,6 +1688,97 @@ mod tests {
                     s.d_kappa[i][k],
                     fd[k]
                 );
+            }
+        }
+    }
+
+    #[test]
+    fn loaded_directions_assembled_leg_by_leg_are_the_whole_evaluations() {
+        // Each kind of direction: a leg's base (its segment the same, linearised, and under
+        // springs every leg's rest angles moved), a segment length (integrated again), a
+        // platform joint, a map gain (a curvature), and no change at all.
+        let cfg = pcr_robot::RobotConfig::nominal();
+        let r = Robot::new(&cfg).unwrap();
+        let target = Pose::from_mm_deg(15.0, -25.0, 8.0);
+        let kappa = r.ik(&target).unwrap().kappa;
+        type Change = fn(&mut pcr_robot::RobotConfig, f64);
+        let changes: [Change; 5] = [
+            |c, h| c.legs[0].psi_deg += h,
+            |c, h| c.legs[0].l_c_mm += h,
+            |c, h| c.legs[1].r_p_mm += h,
+            |c, h| c.legs[2].r_base_mm += h,
+            |_, _| {},
+        ];
+        let step = 1e-3;
+        let others: Vec<Robot> = changes
+            .iter()
+            .map(|f| {
+                let mut c = cfg.clone();
+                f(&mut c, step);
+                Robot::new(&c).unwrap()
+            })
+            .collect();
+        for loads in [
+            springs_and_load(),
+            Loads {
+                force: [0.6, -0.4],
+                ..unloaded()
+            },
+        ] {
+            let mut dirs: Vec<Direction> = others
+                .iter()
+                .map(|o| Direction {
+                    robot: o,
+                    kappa,
+                    rest: o.home_joint_angles(),
+                    step,
+                })
+                .collect();
+            // A curvature: leg 2's map.
+            dirs.push(Direction {
+                robot: &r,
+                kappa: [kappa[0], kappa[1] * (1.0 + step), kappa[2]],
+                rest: r.home_joint_angles(),
+                step,
+            });
+            let (mut a, mut b) = (vec![[0.0; 3]; dirs.len()], vec![[0.0; 3]; dirs.len()]);
+            let pa = r
+                .loaded_directions_warm(
+                    &kappa,
+                    &loads,
+                    &target,
+                    &mut LoadedWarm::default(),
+                    &dirs,
+                    &mut a,
+                )
+                .unwrap();
+            let pb = r
+                .loaded_directions_whole(
+                    &kappa,
+                    &loads,
+                    &target,
+                    &mut LoadedWarm::default(),
+                    &dirs,
+                    &mut b,
+                )
+                .unwrap();
+            assert_eq!(pa, pb);
+            // The unchanged robot's column is zero either way; a curvature's and a length's
+            // (segments integrated again, the others' shares kept) are the whole evaluation's
+            // to rounding; the linearised legs' to first order in the step (1e-8 of the
+            // column at a step of 1e-3).
+            assert_eq!(a[4], [0.0; 3]);
+            assert_eq!(b[4], [0.0; 3]);
+            for (k, (x, y)) in a.iter().zip(&b).enumerate() {
+                let scale = y.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                for c in 0..3 {
+                    assert!(
+                        (x[c] - y[c]).abs() <= 1e-7 * scale + 1e-12,
+                        "direction {k} comp {c}: {} vs {} (whole)",
+                        x[c],
+                        y[c]
+                    );
+                }
             }
         }
     }
