@@ -1692,15 +1692,22 @@ mod tests {
         }
     }
 
+    /// The nominal robot at a pose off home, with its curvatures there: where the tests of the
+    /// loaded directions linearise.
+    fn nominal_at_target() -> (pcr_robot::RobotConfig, Robot, Pose, [f64; 3]) {
+        let cfg = pcr_robot::RobotConfig::nominal();
+        let r = Robot::new(&cfg).unwrap();
+        let target = Pose::from_mm_deg(15.0, -25.0, 8.0);
+        let kappa = r.ik(&target).unwrap().kappa;
+        (cfg, r, target, kappa)
+    }
+
     #[test]
     fn loaded_directions_assembled_leg_by_leg_are_the_whole_evaluations() {
         // Each kind of direction: a leg's base (its segment the same, linearised, and under
         // springs every leg's rest angles moved), a segment length (integrated again), a
         // platform joint, a map gain (a curvature), and no change at all.
-        let cfg = pcr_robot::RobotConfig::nominal();
-        let r = Robot::new(&cfg).unwrap();
-        let target = Pose::from_mm_deg(15.0, -25.0, 8.0);
-        let kappa = r.ik(&target).unwrap().kappa;
+        let (cfg, r, target, kappa) = nominal_at_target();
         type Change = fn(&mut pcr_robot::RobotConfig, f64);
         let changes: [Change; 5] = [
             |c, h| c.legs[0].psi_deg += h,
@@ -1788,10 +1795,7 @@ mod tests {
         // Strong springs and a load: a change of the drawing moves the loaded pose differently
         // from the rigid one (the springs' rest angles move with it), and a change of the map
         // moves the curvatures.
-        let cfg = pcr_robot::RobotConfig::nominal();
-        let r = Robot::new(&cfg).unwrap();
-        let target = Pose::from_mm_deg(15.0, -25.0, 8.0);
-        let kappa = r.ik(&target).unwrap().kappa;
+        let (cfg, r, target, kappa) = nominal_at_target();
         let loads = Loads {
             force: [0.6, -0.4],
             k_m: 900.0,
