@@ -580,9 +580,10 @@ class Sweep:
         for cid, seed in over:
             for r in self.analyse(by_id[cid], seed, core, False, alone=True):
                 redone[(cid, seed, r["convention"])] = r
-                self.say("%-44s s%d %-7s %-6s alone: %s s cpu" % (
+                self.say("%-44s s%d %-7s %-6s %s" % (
                     cid, seed, r["convention"], "ok" if not r["failures"] else "FAIL",
-                    fmt(r.get("cpu_alone_s"), "%.1f")))
+                    "alone: %.1f s cpu" % r["cpu_alone_s"] if r.get("cpu_alone_s") is not None
+                    else "within the budget in the sweep: not timed again"))
         return [redone.get((r["case"], r["seed"], r["convention"]), r) for r in runs]
 
 
