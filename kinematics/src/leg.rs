@@ -38,16 +38,30 @@ impl Leg {
     /// Whether `other` has the same drawing: every field the kinematics and statics read
     /// besides the tendon map and the drive (base point, orientation, lengths, platform joint),
     /// compared exactly. Two legs of the same drawing at the same curvature have the same
-    /// segment, joint and tangent.
+    /// segment, joint and tangent. Every field is named, so that a field added to `Leg` is
+    /// placed on one side or the other before this compiles.
     pub fn same_drawing(&self, other: &Leg) -> bool {
-        self.b == other.b
-            && self.psi == other.psi
-            && self.cos_psi == other.cos_psi
-            && self.sin_psi == other.sin_psi
-            && self.l_c == other.l_c
-            && self.l_ce == other.l_ce
-            && self.l_st == other.l_st
-            && self.p_e == other.p_e
+        let Leg {
+            b,
+            psi,
+            cos_psi,
+            sin_psi,
+            l_c,
+            l_ce,
+            l_st,
+            p_e,
+            mm_per_step: _,
+            max_step_rate: _,
+            map: _,
+        } = self;
+        *b == other.b
+            && *psi == other.psi
+            && *cos_psi == other.cos_psi
+            && *sin_psi == other.sin_psi
+            && *l_c == other.l_c
+            && *l_ce == other.l_ce
+            && *l_st == other.l_st
+            && *p_e == other.p_e
     }
 }
 
