@@ -620,11 +620,16 @@ def truth_text(case, factors):
     return "; ".join("%s %s" % (e, EFFECTS[e].describe(factors[e])) for e, _ in case.effects)
 
 
-def over_budget(t, args) -> bool:
-    """Whether a run's cpu time on one core is over the time budget: the time it took alone
-    where it was timed again alone, else its time in the sweep."""
+def judged_cpu(t):
+    """The cpu time on one core a run is judged on: the time it took alone where it was timed
+    again alone (`Sweep.retime_alone`), else its time in the sweep (None without one)."""
     cpu = t.get("cpu_alone_s")
-    cpu = t.get("cpu_s") if cpu is None else cpu
+    return t.get("cpu_s") if cpu is None else cpu
+
+
+def over_budget(t, args) -> bool:
+    """Whether a run's judged cpu time (`judged_cpu`) is over the time budget."""
+    cpu = judged_cpu(t)
     return args.time_budget_s > 0 and cpu is not None and cpu > args.time_budget_s
 
 
@@ -792,8 +797,7 @@ def aggregate(case_list, runs, factors, notes):
         walls = [r["wall_s"] for r in rs if r["wall_s"] is not None]
         cpus = [r["cpu_s"] for r in rs if r["cpu_s"] is not None]
         # The time each run is judged on: alone where it was timed again alone.
-        judged = [r["cpu_alone_s"] if r.get("cpu_alone_s") is not None else r["cpu_s"]
-                  for r in rs if r["cpu_s"] is not None]
+        judged = [judged_cpu(r) for r in rs if r["cpu_s"] is not None]
         wall2 = [r["wall2_s"] for r in rs if r.get("wall2_s") is not None]
         by_seed = {}
         for r in rs:

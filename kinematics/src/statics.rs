@@ -1218,33 +1218,6 @@ impl Robot {
         Ok(Pose::new(z[0], z[1], z[2]))
     }
 
-    /// [`Robot::loaded_directions_warm`] as it was before its legs were assembled one by one:
-    /// every direction's residual evaluated whole, its three segments integrated (the
-    /// reference its tests compare with).
-    #[cfg(test)]
-    fn loaded_directions_whole(
-        &self,
-        kappa: &[f64; 3],
-        loads: &Loads,
-        guess: &Pose,
-        warm: &mut LoadedWarm,
-        directions: &[Direction<'_>],
-        out: &mut [[f64; 3]],
-    ) -> Result<Pose, FkError> {
-        let Linearised { st, z, lu, .. } = self.linearised_warm(kappa, loads, guess, warm)?;
-        let exact = self.loaded_eval(&st, loads, &z, SegmentMode::Exact).res;
-        for (d, o) in directions.iter().zip(out.iter_mut()) {
-            let std = d.robot.loaded_setup_at_rest(&d.kappa, d.rest);
-            let ft =
-                (d.robot.loaded_eval(&std, loads, &z, SegmentMode::Exact).res - exact) / d.step;
-            let dz = lu
-                .solve(&(-ft))
-                .ok_or(FkError::NoSolution { reached: 0.0 })?;
-            *o = [dz[0], dz[1], dz[2]];
-        }
-        Ok(Pose::new(z[0], z[1], z[2]))
-    }
-
     /// The load response at the solved equilibrium `z`: the exact Jacobian there, and the
     /// residual's derivatives with respect to the five parameters.
     fn load_response_at(
@@ -1702,6 +1675,34 @@ mod tests {
         (cfg, r, target, kappa)
     }
 
+    /// [`Robot::loaded_directions_warm`]'s columns as they were before its legs were assembled
+    /// one by one: each direction's residual evaluated whole, its three segments integrated.
+    fn whole_columns(
+        r: &Robot,
+        kappa: &[f64; 3],
+        loads: &Loads,
+        guess: &Pose,
+        dirs: &[Direction<'_>],
+        out: &mut [[f64; 3]],
+    ) -> Pose {
+        let lin = r
+            .linearised_warm(kappa, loads, guess, &mut LoadedWarm::default())
+            .unwrap();
+        let exact = r
+            .loaded_eval(&lin.st, loads, &lin.z, SegmentMode::Exact)
+            .res;
+        for (d, o) in dirs.iter().zip(out.iter_mut()) {
+            let st = d.robot.loaded_setup_at_rest(&d.kappa, d.rest);
+            let res = d
+                .robot
+                .loaded_eval(&st, loads, &lin.z, SegmentMode::Exact)
+                .res;
+            let dz = lin.lu.solve(&(-(res - exact) / d.step)).unwrap();
+            *o = [dz[0], dz[1], dz[2]];
+        }
+        Pose::new(lin.z[0], lin.z[1], lin.z[2])
+    }
+
     #[test]
     fn loaded_directions_assembled_leg_by_leg_are_the_whole_evaluations() {
         // Each kind of direction: a leg's base (its segment the same, linearised, and under
@@ -1759,16 +1760,7 @@ mod tests {
                     &mut a,
                 )
                 .unwrap();
-            let pb = r
-                .loaded_directions_whole(
-                    &kappa,
-                    &loads,
-                    &target,
-                    &mut LoadedWarm::default(),
-                    &dirs,
-                    &mut b,
-                )
-                .unwrap();
+            let pb = whole_columns(&r, &kappa, &loads, &target, &dirs, &mut b);
             assert_eq!(pa, pb);
             // The unchanged robot's column is zero either way; a curvature's and a length's
             // (segments integrated again, the others' shares kept) are the whole evaluation's

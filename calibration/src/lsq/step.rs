@@ -117,21 +117,20 @@ const QR_FIRST_ROWS: usize = 1024;
 /// keeps the direct SVD.
 fn svd_solve(a: DMatrix<f64>, b: DVector<f64>) -> Result<SvdParts, LsqError> {
     let (m, n) = a.shape();
-    if m < QR_FIRST_ROWS || m < 4 * n {
-        let svd = a.svd(true, true);
-        let (Some(u), Some(vt)) = (svd.u, svd.v_t) else {
-            return Err(LsqError::NonFinite);
-        };
-        return Ok((u.tr_mul(&b), svd.singular_values, vt));
-    }
-    let qr = a.qr();
-    let mut qtb = b;
-    qr.q_tr_mul(&mut qtb);
-    let svd = qr.r().svd(true, true);
+    // The matrix whose SVD is taken and the right-hand side its left factor multiplies.
+    let (a, b) = if m < QR_FIRST_ROWS || m < 4 * n {
+        (a, b)
+    } else {
+        let qr = a.qr();
+        let mut qtb = b;
+        qr.q_tr_mul(&mut qtb);
+        (qr.r(), qtb.rows(0, n).into_owned())
+    };
+    let svd = a.svd(true, true);
     let (Some(u), Some(vt)) = (svd.u, svd.v_t) else {
         return Err(LsqError::NonFinite);
     };
-    Ok((u.tr_mul(&qtb.rows(0, n)), svd.singular_values, vt))
+    Ok((u.tr_mul(&b), svd.singular_values, vt))
 }
 
 /// `jac` with column k multiplied by `d[k]`.
