@@ -119,6 +119,7 @@ pub struct Equilibrium {
 
 /// One segment of given curvature: its unloaded joint and tip tangent (base frame), and the
 /// arc's tangent at the integration nodes.
+#[derive(Clone)]
 struct Segment {
     m0: Vec2,
     t: Vec2,
@@ -151,8 +152,10 @@ impl Segment {
     /// The elastica under the tip force `f` (leg's local frame, N) with its base curvature
     /// `u0` (1/mm) above the arc's: the tip's displacement from the arc's tip (local frame, mm)
     /// and the change of the total bending theta(l_C) - theta(0) (rad). Bit for bit the lane of
-    /// [`deflect3`] that integrates it (a test holds it).
-    pub(crate) fn deflect(&self, ei: f64, f: Vec2, u0: f64) -> [f64; 3] {
+    /// [`deflect3`] that integrates it (a test holds it): the solver integrates its segments
+    /// three at a time, and this is the one-segment reference the tests hold them to.
+    #[cfg(test)]
+    fn deflect(&self, ei: f64, f: Vec2, u0: f64) -> [f64; 3] {
         let (fx, fy) = (f[0] / ei, f[1] / ei);
         // State: delta = theta - theta_arc, u = delta', and the displacement (which does not
         // feed back). (cos, sin) of delta are carried from step to step and turned by each
@@ -472,15 +475,6 @@ enum SegmentMode<'a> {
     Linear(&'a Segments),
 }
 
-/// The residual with the segments' inputs and outputs it used.
-struct Evaluation {
-    res: VN,
-    input: [[f64; 3]; 3],
-    out: [[f64; 3]; 3],
-    /// The segments' derivatives ([`SegmentMode::Variational`] only).
-    lin: [[[f64; 3]; 3]; 3],
-}
-
 /// A loaded equilibrium's pose and its first-order responses
 /// ([`Robot::loaded_sensitivity_warm`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -501,6 +495,11 @@ struct Linearised {
     segs: Segments,
     f0: VN,
     lu: nalgebra::LU<f64, nalgebra::Const<N>, nalgebra::Const<N>>,
+    /// The residual at `z` with the segments integrated, and the legs' shares it was assembled
+    /// from: the integration that linearised the segments gives them (its outputs are
+    /// [`deflect3`]'s bit for bit).
+    exact: VN,
+    terms: [LegTerms; 3],
 }
 
 /// Another robot for [`Robot::loaded_directions_warm`]: this one with one parameter of its
@@ -699,7 +698,7 @@ impl Robot {
         max_iter: usize,
     ) -> Result<VN, FkError> {
         let fail = FkError::NoSolution { reached: 0.0 };
-        let mut f = self.loaded_eval(setup, loads, &z, SegmentMode::Exact).res;
+        let mut f = self.loaded_eval(setup, loads, &z, SegmentMode::Exact);
         let mut last = f64::INFINITY;
         for _ in 0..max_iter {
             if !f.iter().all(|v| v.is_finite()) {
@@ -732,7 +731,7 @@ impl Robot {
             if converged(step, last) {
                 return Ok(z);
             }
-            let f_new = self.loaded_eval(setup, loads, &z, SegmentMode::Exact).res;
+            let f_new = self.loaded_eval(setup, loads, &z, SegmentMode::Exact);
             // Broyden: H += (s - H y) s^T H / (s^T H y), s the step, y the residual's change.
             let y = f_new - f;
             let mut hy = VN::zeros();
@@ -828,12 +827,24 @@ impl Robot {
     /// The segments integrated at `z`, with their derivatives (the variational equations
     /// integrated alongside).
     fn segments_at(&self, setup: &LoadedSetup, loads: &Loads, z: &VN) -> Segments {
-        let e = self.loaded_eval(setup, loads, z, SegmentMode::Variational);
-        Segments {
-            input: e.input,
-            out: e.out,
-            lin: e.lin,
-        }
+        self.segments_and_terms_at(setup, loads, z).0
+    }
+
+    /// [`Robot::segments_at`] with the residual at `z` (the segments integrated) and the legs'
+    /// shares it was assembled from.
+    fn segments_and_terms_at(
+        &self,
+        setup: &LoadedSetup,
+        loads: &Loads,
+        z: &VN,
+    ) -> (Segments, VN, [LegTerms; 3]) {
+        let (res, terms, lin) = self.loaded_terms(setup, loads, z, SegmentMode::Variational);
+        let segs = Segments {
+            input: std::array::from_fn(|i| terms[i].input),
+            out: std::array::from_fn(|i| terms[i].out),
+            lin,
+        };
+        (segs, res, terms)
     }
 
     /// The finite-difference Jacobian of the loaded residual at `z` (`f` its value there), the
@@ -909,20 +920,8 @@ impl Robot {
     /// Residual of the loaded equilibrium: loop closures (mm), platform forces (N) and moment
     /// (N, divided by the characteristic radius), the joints' displacements (mm) and the
     /// segments' change of bending (rad times l_C, mm).
-    fn loaded_eval(
-        &self,
-        st: &LoadedSetup,
-        loads: &Loads,
-        z: &VN,
-        mode: SegmentMode,
-    ) -> Evaluation {
-        let (res, terms, lin) = self.loaded_terms(st, loads, z, mode);
-        Evaluation {
-            res,
-            input: std::array::from_fn(|i| terms[i].input),
-            out: std::array::from_fn(|i| terms[i].out),
-            lin,
-        }
+    fn loaded_eval(&self, st: &LoadedSetup, loads: &Loads, z: &VN, mode: SegmentMode) -> VN {
+        self.loaded_terms(st, loads, z, mode).0
     }
 
     /// [`Robot::loaded_eval`]'s residual with the legs' shares it was assembled from and the
@@ -1085,10 +1084,8 @@ impl Robot {
             Ok(z) => z,
             Err(_) => self.fk_loaded_in(&st, kappa, loads, guess)?,
         };
-        let segs = self.segments_at(&st, loads, &z);
-        let f0 = self
-            .loaded_eval(&st, loads, &z, SegmentMode::Linear(&segs))
-            .res;
+        let (segs, exact, terms) = self.segments_and_terms_at(&st, loads, &z);
+        let f0 = self.loaded_eval(&st, loads, &z, SegmentMode::Linear(&segs));
         let lu = self.loaded_jacobian(&st, loads, &z, &segs, &f0).lu();
         Ok(Linearised {
             rest,
@@ -1097,6 +1094,8 @@ impl Robot {
             segs,
             f0,
             lu,
+            exact,
+            terms,
         })
     }
 
@@ -1119,23 +1118,34 @@ impl Robot {
             segs,
             f0,
             lu,
+            exact,
+            terms,
         } = self.linearised_warm(kappa, loads, guess, warm)?;
         let d_loads = self.load_columns(&st, loads, &z, &segs, &f0, &lu)?;
         // The curvatures change the segments themselves: their residual is integrated again
         // (the same fixed-step integration, smooth in the curvature). Leg i's curvature
-        // changes its segment alone: the other legs' shares are those at `z`, and its segment
-        // is integrated alone (bit for bit its lane of the three).
-        let (exact, terms, _) = self.loaded_terms(&st, loads, &z, SegmentMode::Exact);
+        // changes its segment alone: the other legs' shares are those at `z`. The three
+        // changed segments are integrated together, each bit for bit as alone.
         let (sp, cp) = z[2].sin_cos();
+        let h: [f64; 3] = std::array::from_fn(|i| 1e-7 * kappa[i].abs().max(1e-3));
+        let seg: [Segment; 3] =
+            std::array::from_fn(|i| Segment::new(&self.legs[i], kappa[i] + h[i]));
+        let moved: [LegTerms; 3] =
+            std::array::from_fn(|i| self.leg_terms(i, &seg[i], rest[i], loads, &z, sp, cp));
+        let outs = deflect3(
+            &seg,
+            loads.ei,
+            std::array::from_fn(|i| [moved[i].input[0], moved[i].input[1]]),
+            std::array::from_fn(|i| moved[i].input[2]),
+        );
         let mut d_kappa = [[0.0; 3]; 3];
         for (i, col) in d_kappa.iter_mut().enumerate() {
-            let h = 1e-7 * kappa[i].abs().max(1e-3);
-            let seg = Segment::new(&self.legs[i], kappa[i] + h);
             let mut t = terms;
-            t[i] = self.leg_terms(i, &seg, rest[i], loads, &z, sp, cp);
-            let input = t[i].input;
-            t[i].out = seg.deflect(loads.ei, [input[0], input[1]], input[2]);
-            let ft = (self.assemble(loads, &z, &t) - exact) / h;
+            t[i] = LegTerms {
+                out: outs[i],
+                ..moved[i]
+            };
+            let ft = (self.assemble(loads, &z, &t) - exact) / h[i];
             let dz = lu
                 .solve(&(-ft))
                 .ok_or(FkError::NoSolution { reached: 0.0 })?;
@@ -1180,13 +1190,18 @@ impl Robot {
             z,
             segs,
             lu,
+            exact,
+            terms,
             ..
         } = self.linearised_warm(kappa, loads, guess, warm)?;
-        let (exact, terms, _) = self.loaded_terms(&st, loads, &z, SegmentMode::Exact);
         let (sp, cp) = z[2].sin_cos();
         // Without springs the rest angles are not read.
         let springs = loads.k_m != 0.0 || loads.k_p != 0.0;
-        for (d, o) in directions.iter().zip(out.iter_mut()) {
+        // Every direction's legs' shares; the segments to integrate again (direction, leg,
+        // segment) are integrated three at a time afterwards, each bit for bit as alone.
+        let mut shares: Vec<[LegTerms; 3]> = Vec::with_capacity(directions.len());
+        let mut pending: Vec<(usize, usize, Segment)> = Vec::new();
+        for (k, d) in directions.iter().enumerate() {
             let mut t = terms;
             for (i, ti) in t.iter_mut().enumerate() {
                 let (leg, other) = (&self.legs[i], &d.robot.legs[i]);
@@ -1202,14 +1217,31 @@ impl Robot {
                 };
                 let sg = seg.as_ref().unwrap_or(&st.seg[i]);
                 *ti = d.robot.leg_terms(i, sg, d.rest[i], loads, &z, sp, cp);
-                let input = ti.input;
-                ti.out = if leg.l_c == other.l_c && curvature {
-                    segs.linear(i, &input)
+                if leg.l_c == other.l_c && curvature {
+                    ti.out = segs.linear(i, &ti.input);
                 } else {
-                    sg.deflect(loads.ei, [input[0], input[1]], input[2])
-                };
+                    pending.push((k, i, seg.unwrap_or_else(|| st.seg[i].clone())));
+                }
             }
-            let ft = (d.robot.assemble(loads, &z, &t) - exact) / d.step;
+            shares.push(t);
+        }
+        for batch in pending.chunks(3) {
+            // A short batch is filled with its first segment (integrated, not read).
+            let at = |j: usize| &batch[j.min(batch.len() - 1)];
+            let seg: [Segment; 3] = std::array::from_fn(|j| at(j).2.clone());
+            let input = |j: usize| shares[at(j).0][at(j).1].input;
+            let outs = deflect3(
+                &seg,
+                loads.ei,
+                std::array::from_fn(|j| [input(j)[0], input(j)[1]]),
+                std::array::from_fn(|j| input(j)[2]),
+            );
+            for (&(k, i, _), o) in batch.iter().zip(outs) {
+                shares[k][i].out = o;
+            }
+        }
+        for ((d, t), o) in directions.iter().zip(&shares).zip(out.iter_mut()) {
+            let ft = (d.robot.assemble(loads, &z, t) - exact) / d.step;
             let dz = lu
                 .solve(&(-ft))
                 .ok_or(FkError::NoSolution { reached: 0.0 })?;
@@ -1227,9 +1259,7 @@ impl Robot {
         z: &VN,
     ) -> Result<[[f64; 3]; 5], FkError> {
         let segs = self.segments_at(st, loads, z);
-        let f0 = self
-            .loaded_eval(st, loads, z, SegmentMode::Linear(&segs))
-            .res;
+        let f0 = self.loaded_eval(st, loads, z, SegmentMode::Linear(&segs));
         let lu = self.loaded_jacobian(st, loads, z, &segs, &f0).lu();
         self.load_columns(st, loads, z, &segs, &f0, &lu)
     }
@@ -1257,7 +1287,7 @@ impl Robot {
                 3 => l.k_m += h,
                 _ => l.k_p += h,
             }
-            let ft = (self.loaded_eval(st, &l, z, lin).res - *f0) / h;
+            let ft = (self.loaded_eval(st, &l, z, lin) - *f0) / h;
             let dz = lu
                 .solve(&(-ft))
                 .ok_or(FkError::NoSolution { reached: 0.0 })?;
@@ -1688,15 +1718,10 @@ mod tests {
         let lin = r
             .linearised_warm(kappa, loads, guess, &mut LoadedWarm::default())
             .unwrap();
-        let exact = r
-            .loaded_eval(&lin.st, loads, &lin.z, SegmentMode::Exact)
-            .res;
+        let exact = r.loaded_eval(&lin.st, loads, &lin.z, SegmentMode::Exact);
         for (d, o) in dirs.iter().zip(out.iter_mut()) {
             let st = d.robot.loaded_setup_at_rest(&d.kappa, d.rest);
-            let res = d
-                .robot
-                .loaded_eval(&st, loads, &lin.z, SegmentMode::Exact)
-                .res;
+            let res = d.robot.loaded_eval(&st, loads, &lin.z, SegmentMode::Exact);
             let dz = lin.lu.solve(&(-(res - exact) / d.step)).unwrap();
             *o = [dz[0], dz[1], dz[2]];
         }

@@ -511,7 +511,9 @@ impl<'a> Search<'a> {
     }
 
     /// Adds the best significant candidate whose full model confirms its gain; marks the ones
-    /// it does not confirm. False when none is added (the search ends).
+    /// it does not confirm. False when none is added, or when the one added beside effects
+    /// taken in provisionally does not bring the geometry nearer the drawing (the forward
+    /// rounds end).
     fn add_best(
         &mut self,
         round: usize,
@@ -546,16 +548,57 @@ impl<'a> Search<'a> {
             .into_iter()
             .filter(|(f, s)| near_miss(f.name, s, set.opts) && s.held_out_rms_after_mm < recal_best)
             .collect();
+        // With effects taken in provisionally, the round's best candidate alone: the search
+        // then looks for the effect that brings the geometry back, and each confirmation costs
+        // a full acceptance (on drift + creep at 3x, creep taken first, a latency, a load and
+        // springs were put into the full model and refused, 4.4 s, before the search went back
+        // and found drift, then creep).
+        let most = if self.provisional.is_some() {
+            1
+        } else {
+            MAX_CONFIRMATIONS
+        };
         for ((f, s), judged_whole) in sure
             .into_iter()
             .map(|x| (x, false))
             .chain(near.into_iter().map(|x| (x, true)))
-            .take(MAX_CONFIRMATIONS)
+            .take(most)
         {
             let name = f.name;
             let whole = judged_whole.then_some(n_candidates);
             match self.confirm(round, f, &s, &test, set, whole) {
                 Ok(c) => {
+                    // An effect confirmed beside effects taken in provisionally that does not
+                    // bring the geometry nearer the drawing ends the forward rounds: the
+                    // search goes back ([`Search::settle_provisional`]). Where the geometry
+                    // came back (backlash + latency + creep: latency first, then creep; drift
+                    // + creep: drift first, then creep), the first effect confirmed beside it
+                    // brought it back; on the tendon cross-coupling springs beside a tendon
+                    // map took it further out, and three more acceptances were made and
+                    // refused (10 s at 7 %) before the search went back.
+                    let mut stalls = false;
+                    if let Some((snap, taken)) = &mut self.provisional {
+                        let lim = set.opts.max_geometry_change;
+                        let at =
+                            |c: &RobotConfig| crate::plausibility::excess(c, set.drawing, lim).0;
+                        let (before, after) = (at(&self.config), at(&c.config));
+                        tracing::debug!(
+                            name,
+                            before_provisional = at(&snap.config),
+                            before,
+                            after,
+                            "confirmed beside effects taken in provisionally"
+                        );
+                        stalls = after >= before;
+                        if stalls && c.provisional.is_none() {
+                            let first = taken.first().map_or("", |t| t.1.as_str());
+                            taken.push((
+                                round,
+                                name.to_string(),
+                                format!("it does not bring back the geometry {first} took out"),
+                            ));
+                        }
+                    }
                     if let Some(why) = &c.provisional {
                         let snap = Snapshot {
                             config: self.config.clone(),
@@ -582,7 +625,7 @@ impl<'a> Search<'a> {
                     self.added.push(c.added);
                     self.config = c.config;
                     self.ctx = c.ctx;
-                    return true;
+                    return !stalls;
                 }
                 Err(why) => mark(&mut self.scores, round, name, why),
             }
@@ -788,7 +831,13 @@ impl<'a> Search<'a> {
     /// Returns the round to search again from when it went back.
     fn settle_provisional(&mut self, set: &Setting<'a, '_>) -> Option<usize> {
         let (snap, taken) = self.provisional.take()?;
-        let why = leaves_drawing(&self.config, &snap.config, set.drawing, set.opts)?;
+        let why = leaves_drawing(&self.config, &snap.config, set.drawing, set.opts);
+        tracing::debug!(
+            went_back = why.is_some(),
+            ?taken,
+            "effects taken in provisionally settled"
+        );
+        let why = why?;
         self.config = snap.config;
         self.ctx = snap.ctx;
         self.added.truncate(snap.added);
@@ -947,7 +996,8 @@ const MAX_RESTARTS: usize = 1;
 /// Most significant candidates of a round put into the full model: when the best three are
 /// not confirmed (the full model does not keep their gain, they leave the drawing, their
 /// parameters disagree between parts of the data), the ones that explain less are not tried
-/// (each costs a full acceptance) and the search ends.
+/// (each costs a full acceptance) and the search ends. With effects taken in provisionally, one
+/// ([`Search::add_best`]).
 const MAX_CONFIRMATIONS: usize = 3;
 
 /// Most alternations of the calibration from the drawing and the effects' refinement.

@@ -46,6 +46,20 @@ pub(crate) fn leaves_drawing(
     opts: &Options,
 ) -> Option<String> {
     let lim = opts.max_geometry_change;
+    let (new_excess, far) = excess(c, drawing, lim);
+    let (old_excess, _) = excess(current, drawing, lim);
+    (new_excess > old_excess + 1e-9).then(|| {
+        format!(
+            "the geometry would leave the drawing ({}; more than {lim} mm or deg)",
+            far.join(", ")
+        )
+    })
+}
+
+/// How far beyond `lim` (mm or deg) of the drawing the geometry of `c` is: the squares of the
+/// parameters' excesses summed, with the parameters beyond it named. A candidate may not push
+/// a geometry further out (it may bring one the calibration pushed out back).
+pub(crate) fn excess(c: &RobotConfig, drawing: &RobotConfig, lim: f64) -> (f64, Vec<String>) {
     let params = |l: &pcr_robot::LegConfig| {
         [
             ("psi_deg", l.psi_deg),
@@ -57,31 +71,19 @@ pub(crate) fn leaves_drawing(
             ("beta_deg", l.beta_deg),
         ]
     };
-    // How far beyond the bound a geometry is, summed over the parameters: a candidate may not
-    // push it further out (it may bring a geometry the calibration pushed out back).
-    let excess = |c: &RobotConfig| -> (f64, Vec<String>) {
-        let mut total = 0.0;
-        let mut far = Vec::new();
-        for i in 0..3 {
-            let (n, d) = (params(&c.legs[i]), params(&drawing.legs[i]));
-            for k in 0..n.len() {
-                let away = (n[k].1 - d[k].1).abs();
-                if away > lim {
-                    total += (away - lim).powi(2);
-                    far.push(format!("{}[{}] {:+.2}", n[k].0, i + 1, n[k].1 - d[k].1));
-                }
+    let mut total = 0.0;
+    let mut far = Vec::new();
+    for i in 0..3 {
+        let (n, d) = (params(&c.legs[i]), params(&drawing.legs[i]));
+        for k in 0..n.len() {
+            let away = (n[k].1 - d[k].1).abs();
+            if away > lim {
+                total += (away - lim).powi(2);
+                far.push(format!("{}[{}] {:+.2}", n[k].0, i + 1, n[k].1 - d[k].1));
             }
         }
-        (total, far)
-    };
-    let (new_excess, far) = excess(c);
-    let (old_excess, _) = excess(current);
-    (new_excess > old_excess + 1e-9).then(|| {
-        format!(
-            "the geometry would leave the drawing ({}; more than {lim} mm or deg)",
-            far.join(", ")
-        )
-    })
+    }
+    (total, far)
 }
 
 #[cfg(test)]
@@ -120,5 +122,28 @@ mod tests {
             unphysical(&drawing, &drawing, &drawing, &Options::default()),
             None
         );
+    }
+
+    /// The excess counts each parameter beyond the limit by the square of what is beyond, and
+    /// a geometry brought nearer the drawing (still beyond) leaves the drawing no further.
+    #[test]
+    fn the_excess_is_what_lies_beyond_the_limit() {
+        let drawing = RobotConfig::nominal();
+        let mut c = drawing.clone();
+        c.legs[0].l_c_mm -= 5.0;
+        c.legs[2].psi_deg += 2.0;
+        let (e, far) = excess(&c, &drawing, 3.0);
+        assert!((e - 4.0).abs() < 1e-9, "{e}");
+        assert_eq!(far, vec!["l_c_mm[1] -5.00".to_string()]);
+        let mut nearer = c.clone();
+        nearer.legs[0].l_c_mm += 1.0;
+        assert!((excess(&nearer, &drawing, 3.0).0 - 1.0).abs() < 1e-9);
+        let opts = Options {
+            max_geometry_change: 3.0,
+            ..Options::default()
+        };
+        assert!(leaves_drawing(&nearer, &c, &drawing, &opts).is_none());
+        assert!(leaves_drawing(&c, &nearer, &drawing, &opts).is_some());
+        assert_eq!(excess(&drawing, &drawing, 3.0).0, 0.0);
     }
 }
