@@ -553,11 +553,15 @@ impl<'a> Search<'a> {
         // a full acceptance (on drift + creep at 3x, creep taken first, a latency, a load and
         // springs were put into the full model and refused, 4.4 s, before the search went back
         // and found drift, then creep).
-        let most = if self.provisional.is_some() {
-            1
-        } else {
-            MAX_CONFIRMATIONS
-        };
+        // Once an effect beside them has brought the geometry back (no further out than before
+        // the first of them), the search is as without them.
+        let lim = set.opts.max_geometry_change;
+        let excess = |c: &RobotConfig| crate::plausibility::excess(c, set.drawing, lim).0;
+        let still_out = self
+            .provisional
+            .as_ref()
+            .is_some_and(|(snap, _)| excess(&self.config) > excess(&snap.config) + 1e-9);
+        let most = if still_out { 1 } else { MAX_CONFIRMATIONS };
         for ((f, s), judged_whole) in sure
             .into_iter()
             .map(|x| (x, false))
@@ -568,8 +572,9 @@ impl<'a> Search<'a> {
             let whole = judged_whole.then_some(n_candidates);
             match self.confirm(round, f, &s, &test, set, whole) {
                 Ok(c) => {
-                    // An effect confirmed beside effects taken in provisionally that does not
-                    // bring the geometry nearer the drawing ends the forward rounds: the
+                    // An effect confirmed beside effects taken in provisionally, while the
+                    // geometry is still out, that does not bring it nearer the drawing ends
+                    // the forward rounds: the
                     // search goes back ([`Search::settle_provisional`]). Where the geometry
                     // came back (backlash + latency + creep: latency first, then creep; drift
                     // + creep: drift first, then creep), the first effect confirmed beside it
@@ -578,18 +583,15 @@ impl<'a> Search<'a> {
                     // refused (10 s at 7 %) before the search went back.
                     let mut stalls = false;
                     if let Some((snap, taken)) = &mut self.provisional {
-                        let lim = set.opts.max_geometry_change;
-                        let at =
-                            |c: &RobotConfig| crate::plausibility::excess(c, set.drawing, lim).0;
-                        let (before, after) = (at(&self.config), at(&c.config));
+                        let (before, after) = (excess(&self.config), excess(&c.config));
                         tracing::debug!(
                             name,
-                            before_provisional = at(&snap.config),
+                            before_provisional = excess(&snap.config),
                             before,
                             after,
                             "confirmed beside effects taken in provisionally"
                         );
-                        stalls = after >= before;
+                        stalls = still_out && after >= before;
                         if stalls && c.provisional.is_none() {
                             let first = taken.first().map_or("", |t| t.1.as_str());
                             taken.push((
