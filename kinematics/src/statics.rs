@@ -1217,10 +1217,10 @@ impl Robot {
                 };
                 let sg = seg.as_ref().unwrap_or(&st.seg[i]);
                 *ti = d.robot.leg_terms(i, sg, d.rest[i], loads, &z, sp, cp);
-                if leg.l_c == other.l_c && curvature {
-                    ti.out = segs.linear(i, &ti.input);
-                } else {
-                    pending.push((k, i, seg.unwrap_or_else(|| st.seg[i].clone())));
+                // A changed length or curvature (a segment of its own) is integrated again.
+                match seg {
+                    Some(seg) if leg.l_c != other.l_c || !curvature => pending.push((k, i, seg)),
+                    _ => ti.out = segs.linear(i, &ti.input),
                 }
             }
             shares.push(t);

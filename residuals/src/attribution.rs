@@ -548,19 +548,16 @@ impl<'a> Search<'a> {
             .into_iter()
             .filter(|(f, s)| near_miss(f.name, s, set.opts) && s.held_out_rms_after_mm < recal_best)
             .collect();
-        // With effects taken in provisionally, the round's best candidate alone: the search
-        // then looks for the effect that brings the geometry back, and each confirmation costs
-        // a full acceptance (on drift + creep at 3x, creep taken first, a latency, a load and
-        // springs were put into the full model and refused, 4.4 s, before the search went back
-        // and found drift, then creep).
-        // Once an effect beside them has brought the geometry back (no further out than before
-        // the first of them), the search is as without them.
-        let lim = set.opts.max_geometry_change;
-        let excess = |c: &RobotConfig| crate::plausibility::excess(c, set.drawing, lim).0;
-        let still_out = self
-            .provisional
-            .as_ref()
-            .is_some_and(|(snap, _)| excess(&self.config) > excess(&snap.config) + 1e-9);
+        // While effects taken in provisionally keep the geometry out of the drawing (as
+        // [`Search::settle_provisional`] judges it), the round's best candidate alone: the
+        // search then looks for the effect that brings the geometry back, and each
+        // confirmation costs a full acceptance (on drift + creep at 3x, creep taken first, a
+        // latency, a load and springs were put into the full model and refused, 4.4 s, before
+        // the search went back and found drift, then creep). Once the geometry is back, the
+        // search is as without them.
+        let still_out = self.provisional.as_ref().is_some_and(|(snap, _)| {
+            leaves_drawing(&self.config, &snap.config, set.drawing, set.opts).is_some()
+        });
         let most = if still_out { 1 } else { MAX_CONFIRMATIONS };
         for ((f, s), judged_whole) in sure
             .into_iter()
@@ -574,15 +571,18 @@ impl<'a> Search<'a> {
                 Ok(c) => {
                     // An effect confirmed beside effects taken in provisionally, while the
                     // geometry is still out, that does not bring it nearer the drawing ends
-                    // the forward rounds: the
-                    // search goes back ([`Search::settle_provisional`]). Where the geometry
-                    // came back (backlash + latency + creep: latency first, then creep; drift
-                    // + creep: drift first, then creep), the first effect confirmed beside it
-                    // brought it back; on the tendon cross-coupling springs beside a tendon
-                    // map took it further out, and three more acceptances were made and
-                    // refused (10 s at 7 %) before the search went back.
+                    // the forward rounds: the search goes back
+                    // ([`Search::settle_provisional`]). Where the geometry came back
+                    // (backlash + latency + creep: latency first, then creep; drift + creep:
+                    // drift first, then creep), the first effect confirmed beside it brought
+                    // it back; on the tendon cross-coupling springs beside a tendon map took
+                    // it further out, and three more acceptances were made and refused (10 s
+                    // at 7 %) before the search went back.
                     let mut stalls = false;
                     if let Some((snap, taken)) = &mut self.provisional {
+                        let lim = set.opts.max_geometry_change;
+                        let excess =
+                            |c: &RobotConfig| crate::plausibility::excess(c, set.drawing, lim).0;
                         let (before, after) = (excess(&self.config), excess(&c.config));
                         tracing::debug!(
                             name,
