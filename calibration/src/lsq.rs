@@ -79,6 +79,16 @@ pub struct Options {
     pub gtol: f64,
     /// Largest number of residual evaluations (Jacobian evaluations not counted).
     pub max_evaluations: usize,
+    /// Whether the Jacobian is evaluated at the point the solver ends on (SciPy's way, and the
+    /// default: [`Fit::jacobian`] is the optimum's, as an error estimate needs). Off, a step
+    /// that meets the convergence test is taken without one, and [`Fit::jacobian`] is the
+    /// Jacobian at the point before that step: a caller that reads only the optimum saves an
+    /// evaluation of the Jacobian (the joint refinements of `pcr_residuals`, where it costs
+    /// several evaluations of the model). The optimum is the same either way.
+    pub jacobian_at_end: bool,
+    /// The initial trust-region radius as a multiple of the starting point's length in the
+    /// scaled variables (MINPACK's `factor`; 1 is SciPy's `trf`, MINPACK's default is 100).
+    pub initial_radius_factor: f64,
 }
 
 impl Default for Options {
@@ -88,6 +98,8 @@ impl Default for Options {
             xtol: 1e-8,
             gtol: 1e-8,
             max_evaluations: 1000,
+            jacobian_at_end: true,
+            initial_radius_factor: 1.0,
         }
     }
 }
@@ -151,7 +163,8 @@ pub struct Fit {
     pub residuals: Vec<f64>,
     /// 0.5 |f|^2 at the optimum.
     pub cost: f64,
-    /// Jacobian at the optimum (m x n).
+    /// Jacobian at the optimum (m x n); with [`Options::jacobian_at_end`] off, where the last
+    /// step (the one that met the convergence test) started.
     pub jacobian: DMatrix<f64>,
     /// Why it stopped.
     pub status: Status,
@@ -252,7 +265,9 @@ pub fn solve<P: Problem + ?Sized>(
         }
         let sub = solver.subproblem(v, &dv, g_norm)?;
         let search = solver.search_step(&sub);
-        if search.lowered_cost() {
+        if search.lowered_cost() && search.status.is_some() && !opt.jacobian_at_end {
+            solver.take_trial();
+        } else if search.lowered_cost() {
             solver.accept_trial()?;
         } else if search.status.is_none() && solver.budget_spent() {
             break Status::MaxEvaluations;
@@ -394,6 +409,89 @@ mod tests {
         // corr(a, b) = -tbar / sqrt(tbar^2 + Stt/n) = -2 / sqrt(4 + 2)
         let c = fit.correlation().unwrap();
         assert!((c[(0, 1)] + 2.0 / 6f64.sqrt()).abs() < 1e-7, "{c}");
+    }
+
+    /// A problem that counts its Jacobians (forward differences underneath).
+    struct Counted<P>(P, usize);
+    impl<P: Problem> Problem for Counted<P> {
+        fn residual_count(&self) -> usize {
+            self.0.residual_count()
+        }
+        fn residuals(&mut self, x: &[f64], r: &mut [f64]) -> Result<(), String> {
+            self.0.residuals(x, r)
+        }
+        fn jacobian(
+            &mut self,
+            x: &[f64],
+            r: &[f64],
+            upper: &[f64],
+            j: &mut DMatrix<f64>,
+        ) -> Result<(), String> {
+            self.1 += 1;
+            forward_difference(&mut self.0, x, r, upper, j)
+        }
+    }
+
+    /// y = a exp(b t) on 20 points, with a residual that no (a, b) takes away (the fits stop
+    /// on the cost's change, not a zero gradient).
+    struct Exp;
+    impl Problem for Exp {
+        fn residual_count(&self) -> usize {
+            20
+        }
+        fn residuals(&mut self, x: &[f64], r: &mut [f64]) -> Result<(), String> {
+            for (k, r) in r.iter_mut().enumerate() {
+                let t = k as f64 / 10.0;
+                *r = x[0] * (x[1] * t).exp() - 30.0 * (0.2 * t).exp() - 0.1 * (k as f64).sin();
+            }
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn without_the_jacobian_at_the_end_the_optimum_is_the_same_for_one_jacobian_less() {
+        let run = |jacobian_at_end| {
+            let mut p = Counted(Exp, 0);
+            let opt = Options {
+                jacobian_at_end,
+                ..Options::default()
+            };
+            let fit = solve(&mut p, &[1.0, 0.1], &[-INF; 2], &[INF; 2], &opt).unwrap();
+            (fit, p.1)
+        };
+        let (with, n_with) = run(true);
+        let (without, n_without) = run(false);
+        assert!(matches!(with.status, Status::Cost | Status::CostAndStep));
+        assert_eq!(with.x, without.x);
+        assert_eq!(with.cost, without.cost);
+        assert_eq!(with.evaluations, without.evaluations);
+        assert_eq!(n_without + 1, n_with);
+        assert_eq!(without.jacobians, n_without);
+    }
+
+    #[test]
+    fn a_larger_first_radius_reaches_the_same_optimum_in_fewer_jacobians() {
+        // Far from the optimum, SciPy's first radius (the start's length) makes the steps
+        // grow by doubling; MINPACK's factor of 100 takes the Gauss-Newton steps at once.
+        let run = |initial_radius_factor| {
+            let mut p = Counted(Exp, 0);
+            let opt = Options {
+                initial_radius_factor,
+                ..Options::default()
+            };
+            let fit = solve(&mut p, &[1.0, 0.1], &[-INF; 2], &[INF; 2], &opt).unwrap();
+            (fit, p.1)
+        };
+        let (scipy, n_scipy) = run(1.0);
+        let (minpack, n_minpack) = run(100.0);
+        for (a, b) in scipy.x.iter().zip(&minpack.x) {
+            assert!((a - b).abs() < 1e-6, "{:?} {:?}", scipy.x, minpack.x);
+        }
+        assert!((minpack.x[0] - 30.0).abs() < 0.1 && (minpack.x[1] - 0.2).abs() < 1e-2);
+        assert!(
+            n_minpack < n_scipy,
+            "{n_minpack} against {n_scipy} Jacobians"
+        );
     }
 
     #[test]

@@ -56,6 +56,9 @@ pub struct Solving<'s> {
     /// can do with: once there are more, the rows not yet solved are left unsolved (a caller
     /// that needs every row stops at the first it cannot have).
     pub failures: Option<(&'s std::sync::atomic::AtomicUsize, usize)>,
+    /// Only the poses are wanted: the rows' first-order responses ([`Prediction::j_q`],
+    /// [`Prediction::j_kappa`]) are left zero (a refinement's evaluations read the poses).
+    pub poses_only: bool,
 }
 
 impl Solving<'_> {
@@ -467,7 +470,7 @@ impl ExtendedModel {
                     None
                 }
             };
-            if let Some(q) = p.pose {
+            if let Some(q) = p.pose.filter(|_| !how.poses_only) {
                 let (j_q, j_kappa) =
                     self.jacobians(&Pose::new(q[0], q[1], q[2]), &p.kappa, &p.dl_eff, mmps);
                 p.j_q = j_q;
@@ -550,7 +553,9 @@ impl ExtendedModel {
             };
             match pose {
                 Some(p) => {
-                    (pred.j_q, pred.j_kappa) = self.jacobians(&p, &kappa, &dl_eff[k], mmps);
+                    if !how.poses_only {
+                        (pred.j_q, pred.j_kappa) = self.jacobians(&p, &kappa, &dl_eff[k], mmps);
+                    }
                     pred.pose = Some([p.x, p.y, p.phi]);
                     guess = p;
                 }

@@ -343,6 +343,7 @@ impl Refit<'_> {
             let want: std::collections::HashSet<usize> = rows.iter().copied().collect();
             let how = crate::model::Solving {
                 states: Some(st),
+                poses_only: true,
                 ..Default::default()
             };
             let preds = model.predict_where_from(s, &|i| want.contains(&i), how);
@@ -431,7 +432,7 @@ pub fn refine(
     max_rows: usize,
     calibration: bool,
 ) -> RobotConfig {
-    refine_with_errors(
+    refine_at(
         config,
         like,
         series,
@@ -440,6 +441,7 @@ pub fn refine(
         max_rows,
         calibration,
         MAX_EVALUATIONS,
+        false,
     )
     .0
 }
@@ -476,6 +478,34 @@ pub(crate) fn refine_with_errors(
     max_rows: usize,
     calibration: bool,
     max_evaluations: usize,
+) -> (RobotConfig, Option<Vec<f64>>) {
+    refine_at(
+        config,
+        like,
+        series,
+        blocks,
+        w_phi,
+        max_rows,
+        calibration,
+        max_evaluations,
+        true,
+    )
+}
+
+/// [`refine_with_errors`]; without `errors` the errors are not computed (`None`) and the
+/// solver does not evaluate the Jacobian at the optimum, which only they read (a Jacobian
+/// costs the model's responses on every refined row: about a tenth of a loaded refinement).
+#[allow(clippy::too_many_arguments)]
+fn refine_at(
+    config: &RobotConfig,
+    like: &ExtendedModel,
+    series: &[Series],
+    blocks: &Blocks,
+    w_phi: f64,
+    max_rows: usize,
+    calibration: bool,
+    max_evaluations: usize,
+    errors: bool,
 ) -> (RobotConfig, Option<Vec<f64>>) {
     let slots = slots(&config.effects);
     if slots.is_empty() {
@@ -549,6 +579,7 @@ pub(crate) fn refine_with_errors(
     let opts = Options {
         max_evaluations,
         ftol: 1e-6,
+        jacobian_at_end: errors,
         ..Options::default()
     };
     let started = std::time::Instant::now();
@@ -563,7 +594,7 @@ pub(crate) fn refine_with_errors(
     );
     match fit {
         Ok(fit) => {
-            let errors = p.errors(&fit, blocks);
+            let errors = if errors { p.errors(&fit, blocks) } else { None };
             (p.config(&fit.x), errors)
         }
         Err(_) => (config.clone(), None),

@@ -75,7 +75,8 @@ impl<'a, P: Problem + ?Sized> Solver<'a, P> {
         let g = jac.tr_mul(&f);
         let scale_inv = column_scale(&jac);
         let (v, dv) = bounds.coleman_li_scaling(&x, &g);
-        let delta = initial_radius(&x, &scaled_by_columns(v, &dv, &scale_inv), &scale_inv);
+        let delta = opt.initial_radius_factor
+            * initial_radius(&x, &scaled_by_columns(v, &dv, &scale_inv), &scale_inv);
         Ok(Solver {
             problem,
             upper,
@@ -150,12 +151,18 @@ impl<'a, P: Problem + ?Sized> Solver<'a, P> {
         search
     }
 
-    /// Takes the trial point: its residuals, cost, Jacobian, gradient and the grown variable
-    /// scale. `Err` when the Jacobian cannot be evaluated there or is not finite.
-    pub(super) fn accept_trial(&mut self) -> Result<(), LsqError> {
+    /// Takes the trial point and its residuals and cost, not its Jacobian (the last step of a
+    /// solve that needs none at its end: [`super::Options::jacobian_at_end`]).
+    pub(super) fn take_trial(&mut self) {
         std::mem::swap(&mut self.x, &mut self.x_new);
         std::mem::swap(&mut self.f, &mut self.f_new);
         self.cost = 0.5 * self.f.norm_squared();
+    }
+
+    /// Takes the trial point: its residuals, cost, Jacobian, gradient and the grown variable
+    /// scale. `Err` when the Jacobian cannot be evaluated there or is not finite.
+    pub(super) fn accept_trial(&mut self) -> Result<(), LsqError> {
+        self.take_trial();
         self.problem
             .jacobian(
                 self.x.as_slice(),
