@@ -93,6 +93,14 @@ pub(crate) fn reported_errors(
 /// ([`refine_with_errors`]) says what their noise does to the values.
 pub(crate) const SEARCH_ROWS: usize = 3000;
 
+/// The refinements' first trust-region radius, as a multiple of the starting point's length in
+/// the solver's scaled variables (MINPACK's `factor`: [`pcr_calibration::lsq::Options`]).
+/// SciPy's radius (1) is the length of the effects' values alone, the calibration parameters
+/// starting at zero, and a refinement took its steps at that radius doubling each time: on
+/// springs + frame + backlash at 3x, 8 Jacobians where the Gauss-Newton steps, taken at once,
+/// reach the same cost in 3 or 4.
+const FIRST_RADIUS: f64 = 100.0;
+
 /// Most evaluations of the model in a refinement of the search (7-13 reach the tolerance).
 const MAX_EVALUATIONS: usize = 200;
 
@@ -580,6 +588,7 @@ fn refine_at(
         max_evaluations,
         ftol: 1e-6,
         jacobian_at_end: errors,
+        initial_radius_factor: FIRST_RADIUS,
         ..Options::default()
     };
     let started = std::time::Instant::now();
