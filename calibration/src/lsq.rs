@@ -448,16 +448,20 @@ mod tests {
         }
     }
 
+    /// [`Exp`] from (1, 0.1) with `opt`: the fit and the Jacobians it evaluated.
+    fn exp_counted(opt: &Options) -> (Fit, usize) {
+        let mut p = Counted(Exp, 0);
+        let fit = solve(&mut p, &[1.0, 0.1], &[-INF; 2], &[INF; 2], opt).unwrap();
+        (fit, p.1)
+    }
+
     #[test]
     fn without_the_jacobian_at_the_end_the_optimum_is_the_same_for_one_jacobian_less() {
         let run = |jacobian_at_end| {
-            let mut p = Counted(Exp, 0);
-            let opt = Options {
+            exp_counted(&Options {
                 jacobian_at_end,
                 ..Options::default()
-            };
-            let fit = solve(&mut p, &[1.0, 0.1], &[-INF; 2], &[INF; 2], &opt).unwrap();
-            (fit, p.1)
+            })
         };
         let (with, n_with) = run(true);
         let (without, n_without) = run(false);
@@ -474,13 +478,10 @@ mod tests {
         // Far from the optimum, SciPy's first radius (the start's length) makes the steps
         // grow by doubling; MINPACK's factor of 100 takes the Gauss-Newton steps at once.
         let run = |initial_radius_factor| {
-            let mut p = Counted(Exp, 0);
-            let opt = Options {
+            exp_counted(&Options {
                 initial_radius_factor,
                 ..Options::default()
-            };
-            let fit = solve(&mut p, &[1.0, 0.1], &[-INF; 2], &[INF; 2], &opt).unwrap();
-            (fit, p.1)
+            })
         };
         let (scipy, n_scipy) = run(1.0);
         let (minpack, n_minpack) = run(100.0);

@@ -790,6 +790,7 @@ impl<'a> Search<'a> {
                 rows,
                 true,
                 evaluations,
+                true,
             )
         };
         set.opts.progress.stage(

@@ -440,7 +440,7 @@ pub fn refine(
     max_rows: usize,
     calibration: bool,
 ) -> RobotConfig {
-    refine_at(
+    refine_with_errors(
         config,
         like,
         series,
@@ -466,45 +466,20 @@ pub(crate) fn search(
     refine(config, like, series, blocks, w_phi, SEARCH_ROWS, true)
 }
 
-/// [`refine`] (at most `max_evaluations` of the model), with the standard errors of the
-/// effects' parameters ([`values`]' order, the solver's units) on the rows it refined on:
+/// [`refine`] (at most `max_evaluations` of the model), with `errors` the standard errors of
+/// the effects' parameters ([`values`]' order, the solver's units) on the rows it refined on:
 /// clustered by time block as the linear fits'
 /// ([`crate::linear::standard_errors`]), the calibration parameters' prior weighed as in theirs
 /// ([`crate::linear::PRIOR_IN_ERRORS`]). `None` when there is nothing to refine or the solver
-/// fails.
+/// fails, and without `errors`: the solver then does not evaluate the Jacobian at the optimum,
+/// which only they read (a Jacobian costs the model's responses on every refined row, about a
+/// tenth of a loaded refinement).
 ///
 /// A refinement on a subsample estimates with the subsample's noise: the errors of the fit
 /// that found an effect (every training row) are then too small for the values the model
 /// holds (periodic-10x: 10.014 +- 0.0032 steps from 2,938 of 44,071 rows, 4.3 errors off).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn refine_with_errors(
-    config: &RobotConfig,
-    like: &ExtendedModel,
-    series: &[Series],
-    blocks: &Blocks,
-    w_phi: f64,
-    max_rows: usize,
-    calibration: bool,
-    max_evaluations: usize,
-) -> (RobotConfig, Option<Vec<f64>>) {
-    refine_at(
-        config,
-        like,
-        series,
-        blocks,
-        w_phi,
-        max_rows,
-        calibration,
-        max_evaluations,
-        true,
-    )
-}
-
-/// [`refine_with_errors`]; without `errors` the errors are not computed (`None`) and the
-/// solver does not evaluate the Jacobian at the optimum, which only they read (a Jacobian
-/// costs the model's responses on every refined row: about a tenth of a loaded refinement).
-#[allow(clippy::too_many_arguments)]
-fn refine_at(
     config: &RobotConfig,
     like: &ExtendedModel,
     series: &[Series],
