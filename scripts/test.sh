@@ -3,14 +3,20 @@
 # checks, every Rust test, and the comparison scripts.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-bash scripts/setup.sh
+# Each stage's wall time is printed, so a slow CI run says where its time went.
+stage() {
+  local t0=$SECONDS
+  echo "== $*"
+  "$@"
+  echo "== $* took $((SECONDS - t0)) s (total $SECONDS s)"
+}
+stage bash scripts/setup.sh
 export PATH="$PWD/.venv/bin:$PATH"
 
-cargo fmt --all -- --check
-cargo clippy --workspace --all-targets --locked -- -D warnings
-cargo test --workspace --locked
+stage cargo fmt --all -- --check
+stage cargo clippy --workspace --all-targets --locked -- -D warnings
+stage cargo test --workspace --locked
 for t in scripts/check_*.sh; do
   [ -e "$t" ] || continue
-  echo "== $t"
-  bash "$t"
+  stage bash "$t"
 done

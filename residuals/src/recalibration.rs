@@ -67,10 +67,12 @@ pub fn recalibrated(
 }
 
 /// The calibration's settings for the model `config`: the first calibration's, with the map
-/// function the model holds, the frame held.
+/// function the model holds (fitted alone: nothing here reads the rest of Table I), the frame
+/// held.
 fn options(config: &RobotConfig, recal: &Recalibration) -> CalOptions {
     CalOptions {
         function: Some(config.legs[0].tendon_map.model),
+        every_function: false,
         frame: false,
         ..recal.options.clone()
     }

@@ -131,6 +131,44 @@ fn prototype_geometry_and_true_map_calibrate_down_to_the_noise() {
     assert!(cal.table1[cal.selected - 1].error.is_none());
 }
 
+/// A forced function fitted alone (`every_function: false`, as the residual analysis'
+/// calibrations from the drawing ask) gives the same robot to the bit as when the whole table
+/// is made, and the table's other rows say they were not fitted.
+#[test]
+fn a_forced_function_fitted_alone_gives_the_same_calibration() {
+    let nominal = RobotConfig::nominal();
+    let rec = static_recording(&geometry_and_map_plant(1.0, false), &nominal, 4, 0.05);
+    let whole = Options {
+        function: Some(TendonMapKind::Affine),
+        ..Options::default()
+    };
+    let alone = Options {
+        every_function: false,
+        ..whole.clone()
+    };
+    let a = calibrate(&nominal, &rec, "known-truth", &whole).unwrap();
+    let b = calibrate(&nominal, &rec, "known-truth", &alone).unwrap();
+    assert_eq!(a.selected, 2);
+    assert_eq!(b.selected, 2);
+    assert_eq!(a.robot, b.robot);
+    assert_eq!(a.after.train.m_rms_mm, b.after.train.m_rms_mm);
+    assert_eq!(a.table1.len(), b.table1.len());
+    for (x, y) in a.table1.iter().zip(&b.table1) {
+        if x.index == 2 {
+            assert_eq!(x.test_rms_mm, y.test_rms_mm);
+            continue;
+        }
+        assert!(
+            !x.readings.is_empty(),
+            "function {} fitted in the whole table",
+            x.index
+        );
+        assert!(y.readings.is_empty(), "function {} fitted alone", y.index);
+        let e = y.error.as_deref().unwrap_or_default();
+        assert!(e.contains("not fitted"), "function {}: {e}", y.index);
+    }
+}
+
 /// Only the parameters the paper frees deviate, and the true map is in the family (the plant's
 /// linear map with a gain and an offset is function 2): every parameter comes back to within
 /// four standard errors of the plant's value, and those errors are small.
