@@ -296,11 +296,15 @@ impl Refit<'_> {
                 Some(dl) => {
                     let mut k = 0;
                     for ((s, rows), sens) in self.series.iter().zip(&self.rows).zip(&sens) {
-                        let kappa = mk.curvatures(s, rows);
-                        for ((&i, sn), kappa) in rows.iter().zip(sens).zip(&kappa) {
+                        // A load or the frame leaves the curvatures where they are at `x`.
+                        let moved = self.slots[p]
+                            .moves_curvatures
+                            .then(|| mk.curvatures(s, rows));
+                        for (r, (&i, sn)) in rows.iter().zip(sens).enumerate() {
                             let col = match (s.samples[i].pose, sn) {
                                 (Some(m), Some(sn)) => {
                                     let (m0, m1) = (model.corrected(m), mk.corrected(m));
+                                    let kappa = moved.as_ref().map_or(sn.kappa, |c| c[r]);
                                     let dk = nalgebra::Vector3::from(std::array::from_fn(|l| {
                                         kappa[l] - sn.kappa[l]
                                     }));
@@ -753,5 +757,69 @@ mod tests {
         };
         assert_eq!(slots(&springs).len(), 2);
         assert!(slots(&Effects::default()).is_empty());
+    }
+    /// A parameter that says it leaves the curvatures alone (a load's, the frame's) leaves
+    /// them the same to the bit, and every other one moves them: a refinement's Jacobian relies
+    /// on it to skip the stages before the kinematics for the first.
+    #[test]
+    fn only_the_parameters_that_say_so_move_the_curvatures() {
+        let mut cfg = RobotConfig::nominal();
+        let home = pcr_kinematics::Robot::new(&cfg).unwrap().home_motor_steps();
+        let mut rec = pcr_recording::Recording::default();
+        for k in 0..200 {
+            let t = k as f64 * 0.02;
+            let q: [i32; 3] = std::array::from_fn(|i| {
+                (home[i] + 80.0 * (0.9 * t + i as f64).sin()).round() as i32
+            });
+            let mut r = pcr_recording::Row::new(t, q);
+            r.pose = [Some(0.0); 3];
+            rec.rows.push(r);
+        }
+        let s = Series::from_recording(&rec, "t").unwrap();
+        cfg.effects = Effects {
+            creep: Some(Creep {
+                gain: [0.1, 0.2, 0.3],
+                time_constant_s: 1.0,
+            }),
+            compliance: Some(Compliance {
+                ei_n_mm2: 6.5e4,
+                force_n: [0.4, -0.3],
+                couple_n_mm: 20.0,
+                k_m_n_mm_per_rad: 300.0,
+                k_p_n_mm_per_rad: 200.0,
+            }),
+            frame: Some(FrameCorrection {
+                dx_mm: 0.2,
+                dy_mm: -0.1,
+                dphi_deg: 0.3,
+            }),
+            periodic: vec![Periodic {
+                motor: 1,
+                period_steps: 64.0,
+                amplitude_steps: 2.0,
+                phase_deg: 30.0,
+            }],
+            ..latency_backlash_drift()
+        };
+        let rows: Vec<usize> = (0..200).step_by(7).collect();
+        let curvatures = |c: &RobotConfig| {
+            let mut m = ExtendedModel::new(c, crate::effects::chain()).unwrap();
+            m.interpolate = false;
+            m.curvatures(&s, &rows)
+        };
+        let base = curvatures(&cfg);
+        let all = slots(&cfg.effects);
+        assert_eq!(all.iter().filter(|p| !p.moves_curvatures).count(), 8);
+        for (n, p) in all.iter().enumerate() {
+            let mut moved = cfg.clone();
+            let v = (p.get)(&cfg.effects, p.index);
+            (p.set)(&mut moved.effects, p.index, (v + 0.5).min(p.hi));
+            let other = curvatures(&moved);
+            if p.moves_curvatures {
+                assert_ne!(other, base, "parameter {n} says it moves the curvatures");
+            } else {
+                assert_eq!(other, base, "parameter {n} says it leaves them");
+            }
+        }
     }
 }

@@ -209,6 +209,7 @@ impl Effect for Backlash {
                 index: i,
                 lo: 0.0,
                 hi: 50.0,
+                moves_curvatures: true,
             })
             .collect()
     }

@@ -186,6 +186,7 @@ impl Effect for Creep {
                 index: i,
                 lo: -0.5,
                 hi: 0.5,
+                moves_curvatures: true,
             })
             .collect();
         v.push(Parameter {
@@ -198,6 +199,7 @@ impl Effect for Creep {
             index: 0,
             lo: 0.5f64.ln(),
             hi: 5000f64.ln(),
+            moves_curvatures: true,
         });
         v
     }

@@ -145,6 +145,7 @@ impl Effect for Drift {
                 index: i,
                 lo: -1e3,
                 hi: 1e3,
+                moves_curvatures: true,
             })
             .collect()
     }

@@ -94,6 +94,7 @@ impl Effect for ExternalLoad {
                 index: j,
                 lo: -50.0,
                 hi: 50.0,
+                moves_curvatures: false,
             })
             .collect()
     }

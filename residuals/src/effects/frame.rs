@@ -150,6 +150,7 @@ impl Effect for Frame {
                 index: j,
                 lo: -50.0,
                 hi: 50.0,
+                moves_curvatures: false,
             })
             .collect()
     }

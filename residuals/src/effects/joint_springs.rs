@@ -97,6 +97,7 @@ impl Effect for JointSprings {
                 index: j,
                 lo: -100.0,
                 hi: 100.0,
+                moves_curvatures: false,
             })
             .collect()
     }

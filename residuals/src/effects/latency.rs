@@ -114,6 +114,7 @@ impl Effect for Latency {
             index: 0,
             lo: -0.2,
             hi: 1.0,
+            moves_curvatures: true,
         }]
     }
 

@@ -79,6 +79,11 @@ pub struct Parameter {
     pub lo: f64,
     /// Upper bound, in the solver's unit.
     pub hi: f64,
+    /// Whether it acts in the stages before the kinematics (timing, transmission, play,
+    /// tendons: [`crate::extension::Extension`] stages 1 to 4), so that the curvatures move
+    /// with it. A load's or the capture frame's does not: a refinement's Jacobian takes the
+    /// curvatures at the point for it instead of running those stages over every row again.
+    pub moves_curvatures: bool,
 }
 
 /// Which independent parts of the training rows a candidate's parameters are compared on

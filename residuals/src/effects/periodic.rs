@@ -279,6 +279,7 @@ impl Effect for Periodic {
                 index: k,
                 lo: -50.0,
                 hi: 50.0,
+                moves_curvatures: true,
             });
             v.push(Parameter {
                 get: |e, k| e.periodic[k].phase_deg,
@@ -286,6 +287,7 @@ impl Effect for Periodic {
                 index: k,
                 lo: -720.0,
                 hi: 720.0,
+                moves_curvatures: true,
             });
         }
         v
