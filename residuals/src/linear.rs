@@ -101,7 +101,8 @@ pub fn solve_joint(
     // Per block: E^T E, E^T G, E^T r, G^T r.
     struct Acc {
         ee: DMatrix<f64>,
-        eg: DMatrix<f64>,
+        /// Row by row (effect column a, nuisance column b at a n_g + b).
+        eg: Vec<f64>,
         er: DVector<f64>,
         gr: DVector<f64>,
     }
@@ -115,7 +116,7 @@ pub fn solve_joint(
         rr += r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
         let acc = per_block[ctx.rows[i].block].get_or_insert_with(|| Acc {
             ee: DMatrix::zeros(n_e, n_e),
-            eg: DMatrix::zeros(n_e, n_g),
+            eg: vec![0.0; n_e * n_g],
             er: DVector::zeros(n_e),
             gr: DVector::zeros(n_g),
         });
@@ -128,8 +129,8 @@ pub fn solve_joint(
             for b in a..n_e {
                 acc.ee[(a, b)] += ca[0] * c[b][0] + ca[1] * c[b][1] + ca[2] * c[b][2];
             }
-            for (b, gb) in g.iter().enumerate() {
-                acc.eg[(a, b)] += ca[0] * gb[0] + ca[1] * gb[1] + ca[2] * gb[2];
+            for (v, gb) in acc.eg[a * n_g..(a + 1) * n_g].iter_mut().zip(g) {
+                *v += ca[0] * gb[0] + ca[1] * gb[1] + ca[2] * gb[2];
             }
         }
     }
@@ -147,8 +148,8 @@ pub fn solve_joint(
                 m[(b, a)] = acc.ee[(a, b)];
             }
             for b in 0..n_g {
-                m[(a, n_e + b)] = acc.eg[(a, b)];
-                m[(n_e + b, a)] = acc.eg[(a, b)];
+                m[(a, n_e + b)] = acc.eg[a * n_g + b];
+                m[(n_e + b, a)] = acc.eg[a * n_g + b];
             }
         }
         for a in 0..n_g {

@@ -315,27 +315,35 @@ impl NuisanceTable {
         }
         let n = self.nui.n;
         let nb = idx.iter().map(|&i| block(i) + 1).max().unwrap_or(1);
-        let mut per: Vec<Option<nalgebra::DMatrix<f64>>> = vec![None; nb];
+        // Each block's upper triangle, row by row in a flat vector (the same sums in the same
+        // order as into a matrix, without its indexing).
+        let mut per: Vec<Option<Vec<f64>>> = vec![None; nb];
         for &i in idx {
-            let g = &self.cols[i];
-            let m = per[block(i)].get_or_insert_with(|| nalgebra::DMatrix::zeros(n, n));
-            for a in 0..n {
-                for b in a..n {
-                    m[(a, b)] += g[a][0] * g[b][0] + g[a][1] * g[b][1] + g[a][2] * g[b][2];
+            let g = &self.cols[i][..n];
+            let m = per[block(i)].get_or_insert_with(|| vec![0.0; n * (n + 1) / 2]);
+            let mut at = 0;
+            for (a, ga) in g.iter().enumerate() {
+                for (v, gb) in m[at..at + n - a].iter_mut().zip(&g[a..]) {
+                    *v += ga[0] * gb[0] + ga[1] * gb[1] + ga[2] * gb[2];
                 }
+                at += n - a;
             }
         }
         let out: NuisanceGram = per
             .into_iter()
             .enumerate()
             .filter_map(|(b, m)| {
-                m.map(|mut m| {
+                m.map(|m| {
+                    let mut full = nalgebra::DMatrix::zeros(n, n);
+                    let mut at = 0;
                     for a in 0..n {
-                        for c in 0..a {
-                            m[(a, c)] = m[(c, a)];
+                        for c in a..n {
+                            full[(a, c)] = m[at];
+                            full[(c, a)] = m[at];
+                            at += 1;
                         }
                     }
-                    (b, m)
+                    (b, full)
                 })
             })
             .collect();
