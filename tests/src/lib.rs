@@ -12,7 +12,10 @@ pub fn workspace() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
-/// Builds the process binaries and the supervisor (debug) and returns their folder.
+/// Builds the process binaries and the supervisor and returns their folder. They are built with
+/// the test profile, as `cargo test` builds the libraries they link: the two builds share every
+/// library (the workspace-hack crate keeps the features the same), where a dev build of the
+/// chain compiled it all a second time.
 pub fn chain_bin_dir() -> PathBuf {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let st = Command::new(cargo)
@@ -20,6 +23,8 @@ pub fn chain_bin_dir() -> PathBuf {
         .args([
             "build",
             "-q",
+            "--profile",
+            "test",
             "-p",
             "pcr-nodes",
             "-p",
