@@ -920,8 +920,7 @@ impl<'a> Search<'a> {
                 p_value: w.cmp.p,
                 note: why,
             });
-            self.config = w.config;
-            self.ctx = w.ctx;
+            (self.config, self.ctx) = w.into_full(set.series, set.blocks);
         }
         removed
     }

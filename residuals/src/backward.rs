@@ -40,10 +40,26 @@ pub struct Removed {
 pub(crate) struct Without<'a> {
     /// The configuration without the effect, the rest refitted and recalibrated.
     pub config: RobotConfig,
-    /// Its residuals (training and held-out rows).
+    /// Its residuals (the held-out rows, and the training rows or every second of them:
+    /// `thinned`).
     pub ctx: Context<'a>,
+    /// Whether `ctx` holds every second training row only ([`Context::thinned`]).
+    pub thinned: bool,
     /// How the model with the effect compares.
     pub cmp: Comparison,
+}
+
+impl<'a> Without<'a> {
+    /// The configuration without the effect and its context on every row, for the search to
+    /// go on from (the thinned context predicted again).
+    pub fn into_full(self, series: &'a [Series], blocks: &Blocks) -> (RobotConfig, Context<'a>) {
+        if !self.thinned {
+            return (self.config, self.ctx);
+        }
+        let w_phi = self.ctx.w_phi;
+        let ctx = Context::new(series, self.ctx.model, blocks, w_phi);
+        (self.config, ctx)
+    }
 }
 
 /// The model with an effect against the model without it, on held-out rows.
@@ -72,6 +88,10 @@ pub(crate) struct Setting<'s> {
 /// recalibration of the model without it must leave for the effect to be clearly needed.
 const CLEAR_MARGIN: f64 = 4.0;
 
+/// The backward pass predicts every so many training rows of the model without an effect
+/// ([`Context::thinned`]).
+const THINNED_EVERY: usize = 2;
+
 /// The model without the effect `name` added with `params`: its entry taken out of `config`,
 /// the other effects and the calibration parameters refitted on the full model, then the
 /// recalibration (the reference of the forward test) put in where it lowers the training error.
@@ -87,7 +107,10 @@ pub(crate) fn without<'a>(
     effect.remove(&mut cfg.effects, params);
     let refined = crate::refine::search(&cfg, &ctx.model, set.series, set.blocks, set.w_phi);
     let model = ExtendedModel::like(&refined, &ctx.model).ok()?;
-    let mut rctx = Context::new(set.series, model, set.blocks, set.w_phi);
+    // Every held-out row, every second training row: the comparison is on the held-out rows,
+    // and the linearised recalibration below is fitted on the training rows kept (the context
+    // is predicted on every row where the effect is taken out, [`Without::full`]).
+    let mut rctx = Context::thinned(set.series, model, set.blocks, set.w_phi, THINNED_EVERY);
     let nb = set.blocks.len();
     let test = ctx.test();
     let with = sse_per_block(ctx, &test, None, nb);
@@ -101,6 +124,7 @@ pub(crate) fn without<'a>(
         )
     };
     let mut rcfg = refined;
+    let mut thinned = true;
     if let Some(g) = effects::reference().and_then(|g| g.fit(&rctx, &rctx.train())) {
         // Clearly needed: the linearised recalibration leaves the model without the effect
         // with CLEAR_MARGIN times its held-out mean square, and the forward rules pass on it at
@@ -120,6 +144,7 @@ pub(crate) fn without<'a>(
             return Some(Without {
                 config: rcfg,
                 ctx: rctx,
+                thinned: true,
                 cmp: clear,
             });
         }
@@ -129,6 +154,7 @@ pub(crate) fn without<'a>(
         ) {
             rcfg = c;
             rctx = x;
+            thinned = false;
         }
     }
     let test_w = rctx.test();
@@ -138,6 +164,7 @@ pub(crate) fn without<'a>(
     Some(Without {
         config: rcfg,
         ctx: rctx,
+        thinned,
         cmp: Comparison {
             ms,
             p,

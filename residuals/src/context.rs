@@ -103,6 +103,25 @@ impl<'a> Context<'a> {
         Self::of_rows(series, model, blocks, w_phi, &wanted, min_rows)
     }
 
+    /// [`Context::new`] on every held-out row and every `every`-th training row of each series
+    /// (row index a multiple of `every`): for a comparison on the held-out rows whose
+    /// linearised fits on the training rows need not see every one of them (rows 20 ms apart
+    /// carry much the same residual). Its [`Context::training_subset`] of a multiple of
+    /// `every` is that of the full context.
+    pub fn thinned(
+        series: &'a [Series],
+        model: ExtendedModel,
+        blocks: &Blocks,
+        w_phi: f64,
+        every: usize,
+    ) -> Self {
+        let wanted = |si: usize, k: usize| {
+            let held_out = blocks.held_out[blocks.block[si][k]];
+            held_out || in_training_subset(held_out, k, every)
+        };
+        Self::of_rows(series, model, blocks, w_phi, &wanted, 0)
+    }
+
     /// [`Context::new`] on the held-out rows alone: the training rows are neither solved nor
     /// listed (their predictions carry the effective motor positions and tendon displacements
     /// only). For judging a model on the held-out rows. As [`Context::at_least`] `min_rows`.
@@ -416,6 +435,26 @@ impl<'a> Context<'a> {
         chunks
     }
 
+    /// Takes the nuisance columns of `other` for this context's, where both hold the same
+    /// rows with the same calibration parameters (a Gauss-Newton step's model after the one
+    /// before it: the columns at the step's start, as a chord method keeps its Jacobian).
+    /// Nothing changes when the rows or the parameters differ, or when this context has
+    /// computed its own.
+    pub fn reuse_nuisance_of(&self, other: &Context) {
+        let (Some(table), true) = (other.nuisance.get(), self.rows.len() == other.rows.len())
+        else {
+            return;
+        };
+        let same_rows = self
+            .rows
+            .iter()
+            .zip(&other.rows)
+            .all(|(a, b)| a.s == b.s && a.k == b.k);
+        if same_rows && table.nui.same_parameters(&self.model.config) {
+            let _ = self.nuisance.set(table.clone());
+        }
+    }
+
     /// The nuisance columns of every row (computed once per context).
     pub fn nuisance(&self) -> std::sync::Arc<NuisanceTable> {
         self.nuisance
@@ -719,6 +758,48 @@ mod tests {
         let sse = thin.sse(&thin.train(), None);
         assert!(sse > 0.0);
         assert!((full.sse(&cut, None) - sse).abs() < 1e-9 * sse);
+    }
+
+    /// The backward pass compares models on a context of every held-out row and every second
+    /// training row ([`Context::thinned`]): those rows of the full context with their
+    /// residuals, and the acceptance's subset of it is the full context's.
+    #[test]
+    fn a_thinned_context_holds_every_held_out_row_and_every_second_training_row() {
+        let cfg = RobotConfig::nominal();
+        let series = series_of(
+            403,
+            |_, t, home| {
+                std::array::from_fn(|i| {
+                    (home[i] + 60.0 * (0.7 * t + i as f64).sin()).round() as i32
+                })
+            },
+            |t| [Some(0.1 * (3.0 * t).sin()), Some(0.05 * t), Some(0.0)],
+        );
+        let blocks = Blocks::in_time(&series, 1.0, 3);
+        let model = ExtendedModel::new(&cfg, crate::effects::chain()).unwrap();
+        let full = Context::new(&series, model.clone(), &blocks, 50.0);
+        let thin = Context::thinned(&series, model, &blocks, 50.0, 2);
+        let kept: Vec<&RowRef> = full
+            .rows
+            .iter()
+            .filter(|r| r.held_out || r.k % 2 == 0)
+            .collect();
+        assert!(kept.len() < full.rows.len() && !full.test().is_empty());
+        assert_eq!(thin.rows.len(), kept.len());
+        for (a, b) in thin.rows.iter().zip(kept) {
+            assert_eq!((a.k, a.block, a.held_out), (b.k, b.block, b.held_out));
+            for c in 0..3 {
+                assert!((a.r[c] - b.r[c]).abs() < 1e-9, "{a:?} {b:?}");
+            }
+        }
+        assert_eq!(thin.test().len(), full.test().len());
+        let sub: Vec<usize> = thin.training_subset(4);
+        let full_sub: Vec<usize> = full.training_subset(4);
+        assert_eq!(sub.len(), full_sub.len());
+        assert!(sub
+            .iter()
+            .zip(&full_sub)
+            .all(|(&i, &j)| thin.rows[i].k == full.rows[j].k));
     }
 
     /// A context that must hold at least so many rows stops predicting once it cannot

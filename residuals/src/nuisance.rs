@@ -140,6 +140,16 @@ impl Nuisance {
         p
     }
 
+    /// Whether `config` has the same calibration parameters as this set (each leg's map of the
+    /// same form), so that columns computed for one can stand for the other's.
+    pub fn same_parameters(&self, config: &RobotConfig) -> bool {
+        self.cfg
+            .iter()
+            .zip(&config.legs)
+            .all(|(a, b)| a.tendon_map.form() == b.tendon_map.form())
+            && config.legs.len() == self.cfg.len()
+    }
+
     /// Applies parameter changes `dx` (in column order) to a robot configuration's legs.
     pub fn apply(&self, dx: &[f64], cfg: &mut RobotConfig) {
         for leg in 0..3 {
