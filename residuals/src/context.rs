@@ -712,21 +712,16 @@ mod tests {
         vec![Series::from_recording(&rec, "t").unwrap()]
     }
 
-    /// The acceptance compares the training error of a context made on every fourth training
-    /// row ([`Context::training`]) with that of a full context cut down to the same rows
-    /// ([`Context::training_subset`]): both must hold the same
-    /// rows with the same residuals, and no held-out row.
-    #[test]
-    fn a_training_context_on_every_fourth_row_is_the_full_context_cut_down() {
-        let cfg = RobotConfig::nominal();
-        let series = series_of(
+    /// 403 rows of the three motors swinging around home, measured a little off the model's
+    /// poses, so that every residual differs.
+    fn moving_series() -> Vec<Series> {
+        series_of(
             403,
             |_, t, home| {
                 std::array::from_fn(|i| {
                     (home[i] + 60.0 * (0.7 * t + i as f64).sin()).round() as i32
                 })
             },
-            // Measured poses a little off the model's, so that every residual differs.
             |t| {
                 [
                     Some(0.1 * (3.0 * t).sin()),
@@ -734,7 +729,17 @@ mod tests {
                     Some(0.001 * (5.0 * t).cos()),
                 ]
             },
-        );
+        )
+    }
+
+    /// The acceptance compares the training error of a context made on every fourth training
+    /// row ([`Context::training`]) with that of a full context cut down to the same rows
+    /// ([`Context::training_subset`]): both must hold the same
+    /// rows with the same residuals, and no held-out row.
+    #[test]
+    fn a_training_context_on_every_fourth_row_is_the_full_context_cut_down() {
+        let cfg = RobotConfig::nominal();
+        let series = moving_series();
         let blocks = Blocks::in_time(&series, 1.0, 3);
         assert!(blocks.held_out.iter().any(|&h| h));
         let model = ExtendedModel::new(&cfg, crate::effects::chain()).unwrap();
@@ -766,15 +771,7 @@ mod tests {
     #[test]
     fn a_thinned_context_holds_every_held_out_row_and_every_second_training_row() {
         let cfg = RobotConfig::nominal();
-        let series = series_of(
-            403,
-            |_, t, home| {
-                std::array::from_fn(|i| {
-                    (home[i] + 60.0 * (0.7 * t + i as f64).sin()).round() as i32
-                })
-            },
-            |t| [Some(0.1 * (3.0 * t).sin()), Some(0.05 * t), Some(0.0)],
-        );
+        let series = moving_series();
         let blocks = Blocks::in_time(&series, 1.0, 3);
         let model = ExtendedModel::new(&cfg, crate::effects::chain()).unwrap();
         let full = Context::new(&series, model.clone(), &blocks, 50.0);
