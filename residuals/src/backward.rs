@@ -109,7 +109,7 @@ pub(crate) fn without<'a>(
     let model = ExtendedModel::like(&refined, &ctx.model).ok()?;
     // Every held-out row, every second training row: the comparison is on the held-out rows,
     // and the linearised recalibration below is fitted on the training rows kept (the context
-    // is predicted on every row where the effect is taken out, [`Without::full`]).
+    // is predicted on every row where the effect is taken out, [`Without::into_full`]).
     let mut rctx = Context::thinned(set.series, model, set.blocks, set.w_phi, THINNED_EVERY);
     let nb = set.blocks.len();
     let test = ctx.test();
@@ -144,7 +144,7 @@ pub(crate) fn without<'a>(
             return Some(Without {
                 config: rcfg,
                 ctx: rctx,
-                thinned: true,
+                thinned,
                 cmp: clear,
             });
         }
