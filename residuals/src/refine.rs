@@ -145,12 +145,26 @@ impl Linearised {
         let mut model = ExtendedModel::like(config, like).map_err(|e| e.0)?;
         model.interpolate = false;
         let nui = Nuisance::of(&model.config);
+        // The rows' curvatures and rigid poses: under loads the columns solve each row's
+        // equilibrium themselves (from the rigid pose, warm-started along the rows), so the
+        // rows are not solved loaded twice.
+        let mut rigid = model.clone();
+        rigid.loads = None;
         let preds: Vec<Vec<crate::model::Prediction>> = series
             .iter()
             .zip(rows)
             .map(|(s, ks)| {
                 let want: std::collections::HashSet<usize> = ks.iter().copied().collect();
-                model.predict_where(s, &|k| want.contains(&k))
+                let how = crate::model::Solving {
+                    poses_only: model.loads.is_some(),
+                    ..Default::default()
+                };
+                let m = if model.loads.is_some() {
+                    &rigid
+                } else {
+                    &model
+                };
+                m.predict_where_from(s, &|k| want.contains(&k), how)
             })
             .collect();
         let at: Vec<(usize, usize)> = rows
