@@ -690,23 +690,30 @@ mod tests {
         assert_eq!(delayed_steps(&s, -1.0)[3], [90.0, 0.0, -9.0]);
     }
 
-    /// Rows solved from the states an earlier prediction kept for them (a fit's evaluations)
-    /// are the rows solved along the series, to the solver's tolerance, for other loads too.
-    #[test]
-    fn rows_resumed_from_their_states_are_the_rows_solved_in_sequence() {
-        let mut cfg = RobotConfig::nominal();
-        let home = Robot::new(&cfg).unwrap().home_motor_steps();
+    /// A series of `n` rows 20 ms apart whose motors swing about home by `amplitude` steps
+    /// (motor i at `rate` t + `phase` i rad), rounded to whole steps, each row with a measured
+    /// pose.
+    fn swinging(cfg: &RobotConfig, n: usize, amplitude: f64, rate: f64, phase: f64) -> Series {
+        let home = Robot::new(cfg).unwrap().home_motor_steps();
         let mut rec = pcr_recording::Recording::default();
-        for k in 0..300 {
+        for k in 0..n {
             let t = k as f64 * 0.02;
             let q: [i32; 3] = std::array::from_fn(|i| {
-                (home[i] + 80.0 * (0.9 * t + i as f64).sin()).round() as i32
+                (home[i] + amplitude * (rate * t + phase * i as f64).sin()).round() as i32
             });
             let mut r = pcr_recording::Row::new(t, q);
             r.pose = [Some(0.0); 3];
             rec.rows.push(r);
         }
-        let s = Series::from_recording(&rec, "t").unwrap();
+        Series::from_recording(&rec, "t").unwrap()
+    }
+
+    /// Rows solved from the states an earlier prediction kept for them (a fit's evaluations)
+    /// are the rows solved along the series, to the solver's tolerance, for other loads too.
+    #[test]
+    fn rows_resumed_from_their_states_are_the_rows_solved_in_sequence() {
+        let mut cfg = RobotConfig::nominal();
+        let s = swinging(&cfg, 300, 80.0, 0.9, 1.0);
         let states = RowStates::default();
         let every_fifth = |k: usize| k.is_multiple_of(5);
         for (force, k_m) in [([0.4, -0.3], 300.0), ([0.5, -0.2], 320.0)] {
@@ -745,18 +752,7 @@ mod tests {
     #[test]
     fn a_loaded_model_interpolates_its_rows_within_the_tolerance() {
         let mut cfg = RobotConfig::nominal();
-        let home = Robot::new(&cfg).unwrap().home_motor_steps();
-        let mut rec = pcr_recording::Recording::default();
-        for k in 0..1500 {
-            let t = k as f64 * 0.02;
-            let q: [i32; 3] = std::array::from_fn(|i| {
-                (home[i] + 150.0 * (0.2 * t + 2.0 * i as f64).sin()).round() as i32
-            });
-            let mut r = pcr_recording::Row::new(t, q);
-            r.pose = [Some(0.0); 3];
-            rec.rows.push(r);
-        }
-        let s = Series::from_recording(&rec, "t").unwrap();
+        let s = swinging(&cfg, 1500, 150.0, 0.2, 2.0);
         for (force, k_m, k_p) in [([0.0, 0.0], 900.0, 600.0), ([1.2, -0.9], 0.0, 0.0)] {
             cfg.effects.compliance = Some(pcr_robot::effects::Compliance {
                 ei_n_mm2: 6.5e4,
