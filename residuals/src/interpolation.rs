@@ -120,15 +120,9 @@ pub struct Interpolation {
     pub rows: usize,
 }
 
-/// The offset of configuration `k` from the chord from `a` to `b` at its projection `t`
-/// ([`chord`]): `k - (a + t (b - a))`.
-fn offset(a: &[f64; 3], b: &[f64; 3], k: &[f64; 3], t: f64) -> [f64; 3] {
-    std::array::from_fn(|l| k[l] - a[l] - t * (b[l] - a[l]))
-}
-
 /// The projection of configuration `k` on the chord from `a` to `b` (0 at `a`, 1 at `b`,
-/// clamped) and its largest distance from the chord (rad).
-pub fn chord(a: &[f64; 3], b: &[f64; 3], k: &[f64; 3]) -> (f64, f64) {
+/// clamped) and its offset from the chord there, `k - (a + t (b - a))` (rad).
+pub fn chord(a: &[f64; 3], b: &[f64; 3], k: &[f64; 3]) -> (f64, [f64; 3]) {
     let d: [f64; 3] = std::array::from_fn(|l| b[l] - a[l]);
     let dd: f64 = d.iter().map(|v| v * v).sum();
     let t = if dd > 0.0 {
@@ -136,10 +130,13 @@ pub fn chord(a: &[f64; 3], b: &[f64; 3], k: &[f64; 3]) -> (f64, f64) {
     } else {
         0.0
     };
-    let dev = (0..3)
-        .map(|l| (k[l] - a[l] - t * d[l]).abs())
-        .fold(0.0, f64::max);
-    (t, dev)
+    (t, std::array::from_fn(|l| k[l] - a[l] - t * d[l]))
+}
+
+/// The largest component of an offset from a chord ([`chord`]): the distance the anchors are
+/// chosen by (rad).
+fn distance(off: &[f64; 3]) -> f64 {
+    off.iter().map(|v| v.abs()).fold(0.0, f64::max)
 }
 
 /// The anchors of the polyline through `cfg` (configurations in path order; `breaks[i]`: the
@@ -167,7 +164,7 @@ pub fn anchors(cfg: &[[f64; 3]], breaks: &[bool]) -> Vec<bool> {
     while let Some((a, b)) = stack.pop() {
         let mut worst = (0.0f64, a);
         for i in a + 1..b {
-            let (_, dev) = chord(&cfg[a], &cfg[b], &cfg[i]);
+            let dev = distance(&chord(&cfg[a], &cfg[b], &cfg[i]).1);
             if dev > worst.0 {
                 worst = (dev, i);
             }
@@ -241,10 +238,10 @@ pub fn interpolate<V: Lerp>(
                 continue;
             };
             let (va, vb) = (va.clone(), vb.clone());
+            let span: [f64; 3] = std::array::from_fn(|l| cfg[b][l] - cfg[a][l]);
             let at = |k: usize| {
-                let (t, _) = chord(&cfg[a], &cfg[b], &cfg[k]);
-                let span: [f64; 3] = std::array::from_fn(|l| cfg[b][l] - cfg[a][l]);
-                V::lerp_off(&va, &vb, t, &span, &offset(&cfg[a], &cfg[b], &cfg[k], t))
+                let (t, off) = chord(&cfg[a], &cfg[b], &cfg[k]);
+                V::lerp_off(&va, &vb, t, &span, &off)
             };
             if within(&at(m), vm) {
                 for k in a + 1..b {

@@ -148,23 +148,23 @@ impl Linearised {
         // The rows' curvatures and rigid poses: under loads the columns solve each row's
         // equilibrium themselves (from the rigid pose, warm-started along the rows), so the
         // rows are not solved loaded twice.
-        let mut rigid = model.clone();
-        rigid.loads = None;
+        let rigid = model.loads.is_some().then(|| ExtendedModel {
+            loads: None,
+            ..model.clone()
+        });
         let preds: Vec<Vec<crate::model::Prediction>> = series
             .iter()
             .zip(rows)
             .map(|(s, ks)| {
                 let want: std::collections::HashSet<usize> = ks.iter().copied().collect();
                 let how = crate::model::Solving {
-                    poses_only: model.loads.is_some(),
+                    poses_only: rigid.is_some(),
                     ..Default::default()
                 };
-                let m = if model.loads.is_some() {
-                    &rigid
-                } else {
-                    &model
-                };
-                m.predict_where_from(s, &|k| want.contains(&k), how)
+                rigid
+                    .as_ref()
+                    .unwrap_or(&model)
+                    .predict_where_from(s, &|k| want.contains(&k), how)
             })
             .collect();
         let at: Vec<(usize, usize)> = rows
