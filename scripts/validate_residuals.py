@@ -70,7 +70,7 @@ def creep_truth(compliance):
 
 # Physical effects of the residual library and its recalibrations (which absorb, not explain).
 LIBRARY = ["backlash", "latency", "creep", "drift", "joint_springs", "external_load", "frame",
-           "periodic"]
+           "periodic", "friction"]
 RECALIBRATIONS = ["geometry", "tendon_map"]
 # Library effects the calibration's own parameters can take in whole: a rigid error of the
 # capture frame is, to within the noise, a change of the legs' base angles and lengths within
@@ -159,13 +159,13 @@ EFFECTS = {
         _periodic,
         lambda f: {"motor": 3, "period": 64.0, "amplitude": 1.0 * f, "phase": 30.0},
         lambda f: "motor 3, %s steps, period 64" % fmt_num(f)),
-    # Outside the library.
     "friction": Effect(
         "friction", "the prototype's: joints 2 N mm, supports 0.04 N",
         lambda f: [("friction", "joints", "true"), ("friction", "joint_torque_n_mm", repr(2.0 * f)),
                    ("friction", "supports", "true"), ("friction", "support_force_n", repr(0.04 * f))],
-        lambda f: {}, lambda f: "joints %s N mm, supports %s N" % (fmt_num(2 * f), fmt_num(0.04 * f)),
-        in_library=False),
+        lambda f: {"joint torque": 2.0 * f, "support force": 0.04 * f},
+        lambda f: "joints %s N mm, supports %s N" % (fmt_num(2 * f), fmt_num(0.04 * f))),
+    # Outside the library.
     "cross_coupling": Effect(
         "cross_coupling", "15 %",
         lambda f: [("tendon_map", "cross_coupling", repr(f))],
@@ -187,7 +187,7 @@ EFFECTS = {
 EXPECTED_FAILURES: dict = {}
 
 LOW = {"backlash": 0.1, "latency": 0.1, "creep": 0.1, "drift": 0.1, "joint_springs": 0.1,
-       "external_load": 0.1, "frame": 0.1, "periodic": 0.1}
+       "external_load": 0.1, "frame": 0.1, "periodic": 0.1, "friction": 0.1}
 FALLBACK = [7.0, 5.0, 4.0]
 
 

@@ -8,6 +8,7 @@
 
 pub mod check;
 pub mod fk;
+pub mod friction;
 pub mod ik;
 pub mod jacobian;
 pub mod leg;

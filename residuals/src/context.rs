@@ -58,7 +58,13 @@ pub struct Context<'a> {
     /// The five load responses of every row, computed on first use, and how they were
     /// interpolated.
     loads: std::sync::OnceLock<LoadResponses>,
+    /// Per series, the rigid pose and the curvatures of every row (the path the friction runs
+    /// along), computed on first use.
+    paths: std::sync::OnceLock<std::sync::Arc<Vec<Path>>>,
 }
+
+/// The rigid pose (if any) and the curvatures of every row of one series.
+pub type Path = (Vec<Option<pcr_kinematics::Pose>>, Vec<[f64; 3]>);
 
 /// The load responses of every row and how they were interpolated (`None`: every row solved,
 /// the exact model).
@@ -198,6 +204,7 @@ impl<'a> Context<'a> {
             unpredicted: self.unpredicted,
             nuisance: std::sync::OnceLock::new(),
             loads: std::sync::OnceLock::new(),
+            paths: std::sync::OnceLock::new(),
         })
     }
 
@@ -274,6 +281,7 @@ impl<'a> Context<'a> {
             unpredicted,
             nuisance: std::sync::OnceLock::new(),
             loads: std::sync::OnceLock::new(),
+            paths: std::sync::OnceLock::new(),
         }
     }
 
@@ -453,6 +461,26 @@ impl<'a> Context<'a> {
         if same_rows && table.nui.same_parameters(&self.model.config) {
             let _ = self.nuisance.set(table.clone());
         }
+    }
+
+    /// Per series, the rigid pose and the curvatures of every row of the context's model
+    /// ([`ExtendedModel::rigid_path`]; computed once per context): the path its friction runs
+    /// along.
+    pub fn paths(&self) -> std::sync::Arc<Vec<Path>> {
+        self.paths
+            .get_or_init(|| {
+                std::sync::Arc::new(
+                    self.series
+                        .par_iter()
+                        .zip(&self.preds)
+                        .map(|(s, p)| {
+                            let kappa: Vec<[f64; 3]> = p.iter().map(|x| x.kappa).collect();
+                            (self.model.rigid_path(s, &kappa), kappa)
+                        })
+                        .collect(),
+                )
+            })
+            .clone()
     }
 
     /// The nuisance columns of every row (computed once per context).

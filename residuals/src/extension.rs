@@ -8,6 +8,7 @@
 //! that the model knows the effects' predictions and not their fits (which need the model).
 
 use crate::series::Series;
+use pcr_kinematics::friction::Friction;
 use pcr_kinematics::statics::Loads;
 use pcr_robot::effects::Effects;
 use std::fmt::Debug;
@@ -36,6 +37,13 @@ pub trait Extension: Debug + Sync {
     /// Stage 5, loads: the loads of the kineto-static model, if the effect loads the robot
     /// (the model takes the first effect's; without any, the rigid constant-curvature model).
     fn loads(&self, _effects: &Effects) -> Option<Loads> {
+        None
+    }
+
+    /// Stage 5b, friction: the friction of the joints and their supports, if the effect rubs
+    /// (the model takes the first effect's): its deflection of the pose along the path of the
+    /// whole series ([`pcr_kinematics::friction`]).
+    fn friction(&self, _effects: &Effects) -> Option<Friction> {
         None
     }
 

@@ -14,13 +14,16 @@
 //!    `de/dt = (gain dl - e) / T`, then `drift`: `rate * (t - t0)`, t0 the recording's first
 //!    row);
 //! 5. the tendon map gives the curvatures and the forward kinematics the pose, loaded when an
-//!    effect loads the robot (`joint_springs`, `external_load`: `[effects.compliance]`);
+//!    effect loads the robot (`joint_springs`, `external_load`: `[effects.compliance]`); then
+//!    the friction of the joints and their supports deflects it by what the path before each
+//!    row left stuck or slipping (`friction`: a pass over every row of the series in order);
 //! 6. measurement: the measurement is corrected before it is compared (`frame`).
 
 use crate::extension::Chain;
 use crate::interpolation::WithGradient;
 use crate::series::Series;
 use nalgebra::Matrix3;
+use pcr_kinematics::friction::{Friction, FrictionState};
 use pcr_kinematics::statics::{LoadedWarm, Loads};
 use pcr_kinematics::{Pose, Robot};
 use pcr_robot::effects::Effects;
@@ -131,6 +134,8 @@ pub struct ExtendedModel {
     pub robot: Robot,
     /// Loads of the compliance effect.
     pub loads: Option<Loads>,
+    /// Friction of the joints and their supports.
+    pub friction: Option<Friction>,
     /// Every row solved on its own (no reuse of the previous row's configuration or
     /// equilibrium): the reference the fast path is tested against.
     pub exact: bool,
@@ -155,6 +160,10 @@ impl ExtendedModel {
         let robot = Robot::new(config).map_err(|e| ModelError(e.to_string()))?;
         Ok(ExtendedModel {
             loads: chain.iter().find_map(|x| x.loads(&config.effects)),
+            friction: chain
+                .iter()
+                .find_map(|x| x.friction(&config.effects))
+                .filter(|f| !f.is_off()),
             robot,
             config: config.clone(),
             exact: false,
@@ -215,7 +224,123 @@ impl ExtendedModel {
                 self.predict_range(s, range, &tendons, want, how)
             })
             .collect();
-        parts.concat()
+        let mut preds = parts.concat();
+        if let Some(f) = &self.friction {
+            let started = std::time::Instant::now();
+            let kappa: Vec<[f64; 3]> = preds.iter().map(|p| p.kappa).collect();
+            let rigid = self.rigid_path(s, &kappa);
+            for (k, d) in self
+                .friction_path(&rigid, &kappa, f)
+                .into_iter()
+                .enumerate()
+            {
+                let p = &mut preds[k];
+                match (p.pose.as_mut(), d) {
+                    (Some(q), Some(d)) => {
+                        for c in 0..3 {
+                            q[c] += d[c];
+                        }
+                    }
+                    (Some(_), None) => {
+                        p.pose = None;
+                        how.failed(s.samples[k].pose.is_some());
+                    }
+                    _ => {}
+                }
+            }
+            tracing::debug!(
+                rows = preds.len(),
+                seconds = started.elapsed().as_secs_f64(),
+                "friction path of a prediction"
+            );
+        }
+        preds
+    }
+
+    /// The rigid pose of every row of a series for the curvatures `kappa` (one per row),
+    /// warm-started from row to row and from the measured poses; `None` where the kinematics do
+    /// not close.
+    pub fn rigid_path(&self, s: &Series, kappa: &[[f64; 3]]) -> Vec<Option<Pose>> {
+        let mut guess = start_guess(s, 0);
+        let mut last: Option<([f64; 3], Pose)> = None;
+        kappa
+            .iter()
+            .zip(&s.samples)
+            .map(|(k, smp)| {
+                if let Some((_, lp)) = last.filter(|(lk, _)| lk == k) {
+                    return Some(lp);
+                }
+                if let Some(p) = smp.pose {
+                    guess = Pose::new(p[0], p[1], p[2]);
+                }
+                let p = self.robot.fk_warm(k, &guess).ok()?;
+                guess = p;
+                last = Some((*k, p));
+                Some(p)
+            })
+            .collect()
+    }
+
+    /// Stage 5b: the friction's deflection of every row of a path (x mm, y mm, phi rad) from
+    /// its rigid poses and curvatures ([`ExtendedModel::rigid_path`]), in order from the first
+    /// row (every element unloaded there); `None` where the row has no rigid pose or the
+    /// friction has no answer (a row without a pose leaves the elements as they were).
+    pub fn friction_path(
+        &self,
+        rigid: &[Option<Pose>],
+        kappa: &[[f64; 3]],
+        f: &Friction,
+    ) -> Vec<Option<[f64; 3]>> {
+        let mut state = FrictionState::default();
+        rigid
+            .iter()
+            .zip(kappa)
+            .map(|(p, k)| {
+                let p = p.as_ref()?;
+                self.robot.friction_step(f, p, k, &mut state).ok()
+            })
+            .collect()
+    }
+
+    /// [`ExtendedModel::friction_path`] with the displacement of the joints M_i at every row
+    /// (base frame, mm): what the friction does to the markers a calibration reads.
+    pub fn friction_path_with_joints(
+        &self,
+        rigid: &[Option<Pose>],
+        kappa: &[[f64; 3]],
+        f: &Friction,
+    ) -> Vec<Option<([f64; 3], [[f64; 2]; 3])>> {
+        let mut state = FrictionState::default();
+        rigid
+            .iter()
+            .zip(kappa)
+            .map(|(p, k)| {
+                let p = p.as_ref()?;
+                let d = self.robot.friction_step(f, p, k, &mut state).ok()?;
+                Some((d, state.joints()))
+            })
+            .collect()
+    }
+
+    /// The derivatives of every row's friction deflection with respect to the joints' and the
+    /// supports' limits at zero friction ([`pcr_kinematics::Robot::friction_onset`]): per row,
+    /// (x mm, y mm, phi rad) per N mm of the joints' couple and per N of the supports' force,
+    /// with the pre-sliding travels and the bending stiffness of `f`.
+    pub fn friction_onset_path(
+        &self,
+        rigid: &[Option<Pose>],
+        kappa: &[[f64; 3]],
+        f: &Friction,
+    ) -> Vec<Option<[[f64; 3]; 2]>> {
+        let mut state = FrictionState::default();
+        rigid
+            .iter()
+            .zip(kappa)
+            .map(|(p, k)| {
+                let p = p.as_ref()?;
+                self.robot.friction_onset(f, p, k, &mut state).ok()
+            })
+            .collect()
     }
 
     /// Stages 1 to 4 of every row of a series: the effective motor positions (steps), the

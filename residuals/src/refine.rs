@@ -117,6 +117,113 @@ struct Refit<'a> {
     /// Per series, the loaded solver's state at each refined row, from the evaluation before
     /// (each evaluation starts a row from its own last equilibrium).
     states: Vec<crate::model::RowStates>,
+    /// The friction's deflection of the refined rows linearised at the start.
+    friction: Option<FrozenFriction>,
+}
+
+/// The friction's deflection of the refined rows, linearised in the friction's own parameters
+/// at the refinement's start and held there for the other parameters' changes: a pass through
+/// every row of a series (the friction's history) costs as much as a few thousand rows of the
+/// rest of the model, and the refinement evaluates the model a dozen times and more. The
+/// deflection moves with the friction's parameters and hardly with the others' (a play or a
+/// calibration parameter moves the path it runs along by a fraction of a step): the
+/// refinement's steps are a chord method for it, and the search that calls the refinement
+/// again starts each time from the deflection of its own model.
+struct FrozenFriction {
+    /// The slots of the parameters that act along the path ([`Parameter::along_path`]).
+    slots: Vec<usize>,
+    /// Their values at the start (solver's units).
+    x0: Vec<f64>,
+    /// Per series and refined row: the deflection at the start (x mm, y mm, phi rad), and its
+    /// derivative by each of those parameters (solver's units).
+    rows: Vec<Vec<([f64; 3], Vec<[f64; 3]>)>>,
+}
+
+impl FrozenFriction {
+    /// The linearisation at `config` on the refined rows `rows` of each series: one pass of the
+    /// friction along every row of each series at the start and one per parameter that acts
+    /// along the path; `None` when none does, or the model has no friction.
+    fn new(
+        config: &RobotConfig,
+        like: &ExtendedModel,
+        slots: &[Parameter],
+        series: &[Series],
+        rows: &[Vec<usize>],
+    ) -> Option<FrozenFriction> {
+        let along: Vec<usize> = (0..slots.len()).filter(|&p| slots[p].along_path).collect();
+        if along.is_empty() {
+            return None;
+        }
+        let model = ExtendedModel::like(config, like).ok()?;
+        model.friction?;
+        let x0: Vec<f64> = along
+            .iter()
+            .map(|&p| (slots[p].get)(&config.effects, slots[p].index))
+            .collect();
+        let per: Vec<Vec<([f64; 3], Vec<[f64; 3]>)>> = series
+            .par_iter()
+            .zip(rows)
+            .map(|(s, rows)| {
+                let all: Vec<usize> = (0..s.samples.len()).collect();
+                let kappa = model.curvatures(s, &all);
+                let rigid = model.rigid_path(s, &kappa);
+                let at = |m: &ExtendedModel| -> Vec<Option<[f64; 3]>> {
+                    m.friction.map_or(vec![Some([0.0; 3]); all.len()], |f| {
+                        m.friction_path(&rigid, &kappa, &f)
+                    })
+                };
+                let base = at(&model);
+                let moved: Vec<(f64, Vec<Option<[f64; 3]>>)> = along
+                    .iter()
+                    .zip(&x0)
+                    .map(|(&p, &v)| {
+                        let slot = &slots[p];
+                        let h = 0.02 * v.abs().max(1.0);
+                        let mut c = config.clone();
+                        (slot.set)(&mut c.effects, slot.index, v + h);
+                        let m = ExtendedModel::like(&c, &model).ok();
+                        (h, m.map_or_else(|| base.clone(), |m| at(&m)))
+                    })
+                    .collect();
+                rows.iter()
+                    .map(|&k| {
+                        let b = base[k].unwrap_or([0.0; 3]);
+                        let cols = moved
+                            .iter()
+                            .map(|(h, d)| {
+                                let d = d[k].unwrap_or(b);
+                                std::array::from_fn(|c| (d[c] - b[c]) / h)
+                            })
+                            .collect();
+                        (b, cols)
+                    })
+                    .collect()
+            })
+            .collect();
+        Some(FrozenFriction {
+            slots: along,
+            x0,
+            rows: per,
+        })
+    }
+
+    /// The deflection of refined row `r` of series `s` at the parameters `x` (every slot's).
+    fn at(&self, s: usize, r: usize, x: &[f64]) -> [f64; 3] {
+        let (b, cols) = &self.rows[s][r];
+        let mut d = *b;
+        for ((col, &p), x0) in cols.iter().zip(&self.slots).zip(&self.x0) {
+            let dx = x[p] - x0;
+            for c in 0..3 {
+                d[c] += col[c] * dx;
+            }
+        }
+        d
+    }
+
+    /// Which of the linearised parameters slot `p` is, if it is one.
+    fn column(&self, p: usize) -> Option<usize> {
+        self.slots.iter().position(|&q| q == p)
+    }
 }
 
 /// The calibration parameters linearised at the refinement's start: their columns on the
@@ -148,6 +255,12 @@ impl Linearised {
         // The rows' curvatures and rigid poses: under loads the columns solve each row's
         // equilibrium themselves (from the rigid pose, warm-started along the rows), so the
         // rows are not solved loaded twice.
+        // The friction's small deflection leaves the columns as they are: the model without it
+        // (no pass over every row of the series for a few thousand).
+        let model = ExtendedModel {
+            friction: None,
+            ..model
+        };
         let rigid = model.loads.is_some().then(|| ExtendedModel {
             loads: None,
             ..model.clone()
@@ -253,6 +366,10 @@ impl Refit<'_> {
         }
         let mut m = ExtendedModel::like(&c, self.like).map_err(|e| e.0)?;
         m.interpolate = false;
+        if self.friction.is_some() {
+            // Its deflection is added linearised ([`FrozenFriction`]).
+            m.friction = None;
+        }
         Ok(m)
     }
 
@@ -263,7 +380,7 @@ impl Refit<'_> {
     /// ([`ExtendedModel::sensitivities`]), and each parameter's column is its forward
     /// difference through the cheap stages times those responses. A parameter that changes
     /// what the responses do not cover (the bending stiffness, or the springs' rest angles
-    /// through the map) gets the forward difference of the full model.
+    /// through the map, or the friction) gets the forward difference of the full model.
     fn effect_columns(
         &self,
         x: &[f64],
@@ -284,6 +401,31 @@ impl Refit<'_> {
         let mut xp = x.to_vec();
         let mut fd_base: Option<Vec<f64>> = None;
         for p in 0..x.len() {
+            if let Some((fr, j0)) = self
+                .friction
+                .as_ref()
+                .and_then(|f| f.column(p).map(|j0| (f, j0)))
+            {
+                // The linearised deflection's own column: its derivative, in the residual's
+                // sign (measured less predicted).
+                let mut k = 0;
+                for (si, rows) in self.rows.iter().enumerate() {
+                    for (r, &i) in rows.iter().enumerate() {
+                        let col = match self.series[si].samples[i].pose {
+                            Some(_) => {
+                                let d = fr.rows[si][r].1[j0];
+                                [-d[0], -d[1], -self.w_phi * d[2]]
+                            }
+                            None => [0.0; 3],
+                        };
+                        for c in 0..3 {
+                            j[(3 * k + c, p)] = col[c];
+                        }
+                        k += 1;
+                    }
+                }
+                continue;
+            }
             let mut h = eps * x[p].abs().max(1.0);
             if x[p] + h > upper[p] {
                 h = -h;
@@ -292,6 +434,8 @@ impl Refit<'_> {
             let h = xp[p] - x[p];
             let mk = self.effects_model(&xp)?;
             let dloads = match (&model.loads, &mk.loads) {
+                // The friction's deflection is not among the kinematics' responses.
+                _ if model.friction != mk.friction => None,
                 (None, None) => Some([0.0; 5]),
                 (Some(a), Some(b))
                     if a.ei == b.ei && rest.is_none_or(|r| r == mk.robot.home_joint_angles()) =>
@@ -365,14 +509,30 @@ impl Refit<'_> {
     fn effect_residuals(&self, x: &[f64], r: &mut [f64]) -> Result<(), String> {
         let model = self.effects_model(x)?;
         let mut k = 0;
-        for ((s, rows), st) in self.series.iter().zip(&self.rows).zip(&self.states) {
+        for (si, ((s, rows), st)) in self
+            .series
+            .iter()
+            .zip(&self.rows)
+            .zip(&self.states)
+            .enumerate()
+        {
             let want: std::collections::HashSet<usize> = rows.iter().copied().collect();
             let how = crate::model::Solving {
                 states: Some(st),
                 poses_only: true,
                 ..Default::default()
             };
-            let preds = model.predict_where_from(s, &|i| want.contains(&i), how);
+            let mut preds = model.predict_where_from(s, &|i| want.contains(&i), how);
+            if let Some(fr) = &self.friction {
+                for (r, &i) in rows.iter().enumerate() {
+                    if let Some(p) = preds[i].pose.as_mut() {
+                        let d = fr.at(si, r, x);
+                        for c in 0..3 {
+                            p[c] += d[c];
+                        }
+                    }
+                }
+            }
             for &i in rows {
                 let (Some(m), Some(p)) = (s.samples[i].pose, preds[i].pose) else {
                     r[3 * k] = 0.0;
@@ -563,6 +723,7 @@ pub(crate) fn refine_with_errors(
         lo.resize(x0.len(), f64::NEG_INFINITY);
         hi.resize(x0.len(), f64::INFINITY);
     }
+    let friction = FrozenFriction::new(config, like, &slots, series, &rows);
     let mut p = Refit {
         base: config,
         like,
@@ -573,6 +734,7 @@ pub(crate) fn refine_with_errors(
         w_phi,
         nuisance,
         states: series.iter().map(|_| Default::default()).collect(),
+        friction,
     };
     // A relative cost change of 1e-6 is a change of chi^2 of about 0.01 on 3000 rows (three
     // coordinates each, at the noise): it moves no parameter by a tenth of its error, and the

@@ -127,6 +127,50 @@ pub struct Periodic {
     pub phase_deg: f64,
 }
 
+/// Coulomb friction of the passive joints (a couple between the link and the body it joins)
+/// and of the joints' supports on the base plate (a force against their sliding), each an
+/// elastic-perfectly-plastic element: it sticks until its load reaches its limit, then slips,
+/// so that the pose depends on the path that led to it. The segments bend under these loads
+/// (the small-load statics of `pcr_kinematics::friction`); the IK feeds the deflection the path
+/// predicts forward.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Friction {
+    /// Coulomb couple of each passive joint (M_i and P_i), N mm.
+    pub joint_torque_n_mm: f64,
+    /// Coulomb force of each joint's support (M_i and P_i) on the base plate, N.
+    pub support_force_n: f64,
+    /// How far a joint turns while it sticks before it slips (its limit over its stick
+    /// stiffness), rad.
+    #[serde(default = "Friction::default_joint_presliding")]
+    pub joint_presliding_rad: f64,
+    /// How far a support moves while it sticks before it slips, mm.
+    #[serde(default = "Friction::default_support_presliding")]
+    pub support_presliding_mm: f64,
+    /// Bending stiffness of each segment, N mm^2.
+    #[serde(default = "Friction::default_ei")]
+    pub ei_n_mm2: f64,
+}
+
+impl Friction {
+    /// A joint's pre-sliding rotation assumed when the file gives none: 1 mrad (about the
+    /// rotation over which the friction of a small plain or ball-bearing joint builds up).
+    pub fn default_joint_presliding() -> f64 {
+        1e-3
+    }
+
+    /// A support's pre-sliding displacement assumed when the file gives none: 5 um.
+    pub fn default_support_presliding() -> f64 {
+        5e-3
+    }
+
+    /// The segments' bending stiffness assumed when the file gives none, N mm^2 (the nominal
+    /// value of the prototype's segments).
+    pub fn default_ei() -> f64 {
+        6.5e4
+    }
+}
+
 /// Every effect a robot file can declare.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -152,6 +196,9 @@ pub struct Effects {
     /// Periodic transmission errors.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub periodic: Vec<Periodic>,
+    /// Friction of the passive joints and their supports.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub friction: Option<Friction>,
 }
 
 impl Effects {
@@ -237,6 +284,39 @@ impl Effects {
                 }
             }
         }
+        if let Some(f) = &self.friction {
+            for (k, v, why, ok) in [
+                (
+                    "joint_torque_n_mm",
+                    f.joint_torque_n_mm,
+                    "must be in [0, 1000] N mm",
+                    f.joint_torque_n_mm >= 0.0 && f.joint_torque_n_mm <= 1e3,
+                ),
+                (
+                    "support_force_n",
+                    f.support_force_n,
+                    "must be in [0, 100] N",
+                    f.support_force_n >= 0.0 && f.support_force_n <= 1e2,
+                ),
+                (
+                    "joint_presliding_rad",
+                    f.joint_presliding_rad,
+                    "must be in (0, 0.1] rad",
+                    f.joint_presliding_rad > 0.0 && f.joint_presliding_rad <= 0.1,
+                ),
+                (
+                    "support_presliding_mm",
+                    f.support_presliding_mm,
+                    "must be in (0, 1] mm",
+                    f.support_presliding_mm > 0.0 && f.support_presliding_mm <= 1.0,
+                ),
+                ("ei_n_mm2", f.ei_n_mm2, "must be > 0", f.ei_n_mm2 > 0.0),
+            ] {
+                if !(v.is_finite() && ok) {
+                    return bad(&format!("friction.{k}"), v.to_string(), why);
+                }
+            }
+        }
         for (i, p) in self.periodic.iter().enumerate() {
             let k = |n: &str| format!("periodic[{}].{n}", i + 1);
             if !(1..=3).contains(&p.motor) {
@@ -304,9 +384,31 @@ mod tests {
             amplitude_steps: 0.4,
             phase_deg: 30.0,
         });
+        r.effects.friction = Some(super::Friction {
+            joint_torque_n_mm: 2.0,
+            support_force_n: 0.04,
+            joint_presliding_rad: 1e-3,
+            support_presliding_mm: 5e-3,
+            ei_n_mm2: 6.5e4,
+        });
         let text = r.to_toml_string();
         let back = RobotConfig::from_toml_str(&text, "x.toml").unwrap();
         assert_eq!(back, r);
+        // The pre-sliding and the stiffness are the library's assumptions when a file gives
+        // only the limits.
+        let short = "[effects.friction]\njoint_torque_n_mm = 2.0\nsupport_force_n = 0.04\n";
+        let mut only = RobotConfig::nominal().to_toml_string();
+        only.push_str(short);
+        let f = RobotConfig::from_toml_str(&only, "y.toml")
+            .unwrap()
+            .effects
+            .friction
+            .unwrap();
+        assert_eq!(f, back.effects.friction.clone().unwrap());
+        let e = RobotConfig::from_toml_str(&only.replace("= 0.04", "= -0.04"), "y.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("effects.friction.support_force_n"), "{e}");
         let bad = text.replace("latency_s = 0.05", "latency_s = 5.0");
         let e = RobotConfig::from_toml_str(&bad, "x.toml")
             .unwrap_err()

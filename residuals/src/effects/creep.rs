@@ -187,6 +187,7 @@ impl Effect for Creep {
                 lo: -0.5,
                 hi: 0.5,
                 moves_curvatures: true,
+                along_path: false,
             })
             .collect();
         v.push(Parameter {
@@ -200,6 +201,7 @@ impl Effect for Creep {
             lo: 0.5f64.ln(),
             hi: 5000f64.ln(),
             moves_curvatures: true,
+            along_path: false,
         });
         v
     }

@@ -151,6 +151,7 @@ impl Effect for Frame {
                 lo: -50.0,
                 hi: 50.0,
                 moves_curvatures: false,
+                along_path: false,
             })
             .collect()
     }

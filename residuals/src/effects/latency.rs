@@ -115,6 +115,7 @@ impl Effect for Latency {
             lo: -0.2,
             hi: 1.0,
             moves_curvatures: true,
+            along_path: false,
         }]
     }
 

@@ -26,6 +26,7 @@
 //! | `tendon_map` | remaining tendon-map nonlinearity | a richer Table I function per leg |
 //! | `geometry` | remaining geometric error (recalibration on every row) | the calibration parameters |
 //! | `periodic` | periodic transmission error of one motor | period P steps, amplitude A steps, phase |
+//! | `friction` | friction of the passive joints and their supports: stick-slip hysteresis of the pose through the segments' compliance | joint couple N mm, support force N |
 //!
 //! A new effect is one module here implementing [`Extension`] and [`Effect`], and its line in
 //! [`ALL`] (and its compensation in the chain, `pcr-control`).
@@ -36,6 +37,7 @@ pub mod creep;
 pub mod drift;
 pub mod external_load;
 pub mod frame;
+pub mod friction;
 pub mod geometry;
 pub mod joint_fit;
 pub mod joint_springs;
@@ -84,6 +86,10 @@ pub struct Parameter {
     /// with it. A load's or the capture frame's does not: a refinement's Jacobian takes the
     /// curvatures at the point for it instead of running those stages over every row again.
     pub moves_curvatures: bool,
+    /// Whether it acts through a pass along every row of the series in order (the friction's
+    /// history), which a refinement linearises at its start rather than running at each of its
+    /// evaluations ([`crate::refine`]).
+    pub along_path: bool,
 }
 
 /// Which independent parts of the training rows a candidate's parameters are compared on
@@ -149,8 +155,8 @@ pub trait Effect: Extension {
     }
 
     /// Where its entry is in the robot file: the place of the fields it writes among those of
-    /// `pcr_robot::effects::Effects` (latency 1, ..., periodic 8; the compliance's load before
-    /// its springs), 0 for the legs. The joint refinement takes the effects' parameters in this
+    /// `pcr_robot::effects::Effects` (latency 1, ..., periodic 8, friction 9; the compliance's
+    /// load before its springs), 0 for the legs. The joint refinement takes the effects' parameters in this
     /// order, and the plausibility lists its reasons in the reverse order.
     fn file_position(&self) -> u8;
 
@@ -186,7 +192,7 @@ pub trait Effect: Extension {
 
 /// Every effect, in the order the candidates are tried (the default of
 /// [`crate::Options::candidates`]).
-pub static ALL: [&dyn Effect; 10] = [
+pub static ALL: [&dyn Effect; 11] = [
     &geometry::Geometry,
     &tendon_map::TendonMap,
     &frame::Frame,
@@ -197,6 +203,7 @@ pub static ALL: [&dyn Effect; 10] = [
     &joint_springs::JointSprings,
     &external_load::ExternalLoad,
     &periodic::Periodic,
+    &friction::Friction,
 ];
 
 /// The effect of a vocabulary name.

@@ -1,0 +1,969 @@
+//! Coulomb friction in the passive joints and in the joints' supports, as loads of the
+//! small-load statics about the constant-curvature configuration.
+//!
+//! Each passive joint (M_i and P_i) can carry a friction couple between the bodies it joins,
+//! and each joint's support (M_i on the segment's tip body, P_i on the platform) a friction
+//! force against the base plate it slides on. Each is an elastic-perfectly-plastic (Jenkins)
+//! element: a stiff spring from an anchor in series with a Coulomb slider. Its load is
+//! `-k (x - a)` while `|k (x - a)|` stays within its limit (stick) and the limit along
+//! `-(x - a)` beyond it (slip), where the anchor `a` follows so that the element sits at its
+//! limit: the history of the path is in the anchors. `x` is the joint angle (gamma_i, zeta_i of
+//! geometry.md) or the joint's position in the base frame; `k` is the limit over the
+//! pre-sliding displacement (the element's travel from stick to slip, a property of the
+//! contact rather than of its load, as in Dahl's model).
+//!
+//! The loads are small (a few N mm, a few tenths of N), so the structure answers them as a
+//! linear elastic one about the configuration of the curvatures ([`SmallLoads`]): the links are
+//! rigid, each segment's tip (and with it M_i, the tip tangent held by the tendons) moves by its
+//! tip compliance times the force on it ([`Robot::tip_compliance`]), the platform is rigid. The
+//! elastic unknowns are the three tips' displacements; the elements' coordinates and the pose
+//! follow from them through the loop closures. Each row's equilibrium minimises the potential
+//! energy of the segments and the elements (convex: a Newton iteration on six unknowns), so
+//! that a stuck support holds its joint against the segment's compliance while a slipping one
+//! pushes with its limit. Near the workspace's edge the platform turns easily and the first-order
+//! answer misses by several per cent of the deflection: the structure's answer is taken again
+//! at the midpoint of the deflection it found (second order; a test holds both against the
+//! large-deflection solver of [`crate::statics`]).
+//!
+//! The model is this crate's own (the plant's friction, `pcr-plant`, is another model of the
+//! same physics); it is what the residual tools fit when the data show friction.
+
+use crate::model::Robot;
+use crate::pose::Pose;
+use nalgebra::{SMatrix, SVector};
+use pcr_robot::geometry as g;
+
+/// Friction elements: 6 joints (gamma_1..3, zeta_1..3: their couples on the link, N mm) and 6
+/// supports (x, y of M_1..3, then of P_1..3: their forces on the tip bodies and the platform,
+/// N): the coordinates `x` and the loads `L` of the elements, in this order.
+pub const ELEMENTS: usize = 18;
+
+/// Elastic degrees of freedom: the displacements of the segments' tips (x, y of M_1..3, base
+/// frame, mm).
+const DOF: usize = 6;
+
+type VE = SVector<f64, ELEMENTS>;
+type VD = SVector<f64, DOF>;
+type MD = SMatrix<f64, DOF, DOF>;
+/// d x / d d: the elements' coordinates per tip displacement.
+type MT = SMatrix<f64, ELEMENTS, DOF>;
+
+/// The friction of the joints and their supports.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Friction {
+    /// Coulomb couple of each passive joint, N mm.
+    pub joint_torque: f64,
+    /// A joint's rotation from stick to slip, rad.
+    pub joint_presliding: f64,
+    /// Coulomb force of each joint's support on the base plate, N.
+    pub support_force: f64,
+    /// A support's displacement from stick to slip, mm.
+    pub support_presliding: f64,
+    /// Segment bending stiffness, N mm^2.
+    pub ei: f64,
+}
+
+impl Friction {
+    /// The friction of a robot file's `[effects.friction]`.
+    pub fn from_effect(f: &pcr_robot::effects::Friction) -> Friction {
+        Friction {
+            joint_torque: f.joint_torque_n_mm,
+            joint_presliding: f.joint_presliding_rad,
+            support_force: f.support_force_n,
+            support_presliding: f.support_presliding_mm,
+            ei: f.ei_n_mm2,
+        }
+    }
+
+    /// Whether nothing rubs (every prediction is the rigid one).
+    pub fn is_off(&self) -> bool {
+        self.joint_torque == 0.0 && self.support_force == 0.0
+    }
+}
+
+/// The small-load statics at one configuration: the elastic degrees of freedom are the
+/// segments' tip displacements `d` (the links and the platform rigid, the tip tangents held by
+/// the tendons); the elements' coordinates are `x0 + t d`, the pose's change `h d`, and the
+/// segments' stiffness `k` (block diagonal, the inverses of their tip compliances). Loads `L`
+/// at the elements hold the tips where `k d = t^T L` (virtual work).
+#[derive(Debug, Clone, Copy)]
+pub struct SmallLoads {
+    /// The elements' coordinates without loads.
+    pub x0: VE,
+    /// d x / d d.
+    pub t: MT,
+    /// d pose / d d (x mm, y mm, phi rad).
+    pub h: SMatrix<f64, 3, DOF>,
+    /// The segments' tip stiffness, N/mm.
+    pub k: MD,
+}
+
+impl SmallLoads {
+    /// The tip displacements, the elements' coordinates and the pose's change (x mm, y mm, phi
+    /// rad) under the loads `l` at the elements (the order of [`ELEMENTS`]).
+    pub fn answer(&self, l: &[f64; ELEMENTS]) -> ([f64; DOF], [f64; ELEMENTS], [f64; 3]) {
+        let q = self.t.tr_mul(&VE::from(*l));
+        let d = self.k.cholesky().map_or(VD::zeros(), |c| c.solve(&q));
+        let x = self.x0 + self.t * d;
+        let p = self.h * d;
+        (d.into(), x.into(), [p[0], p[1], p[2]])
+    }
+}
+
+/// Where each friction element sticks: its history along the path.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct FrictionState {
+    /// Anchors of the element coordinates (a support's two share one 2-D anchor); `None`
+    /// before the first row (the path starts with every element unloaded).
+    anchors: Option<[f64; ELEMENTS]>,
+    /// The tip displacements of the last row (the next row's Newton start).
+    d: [f64; DOF],
+    /// The last row's configuration (pose, curvatures) and its answer: a row at rest keeps it.
+    last: Option<([f64; 3], [f64; 3], [f64; 3])>,
+    /// [`Robot::friction_onset`]'s last answer to the supports (the joints' is in `d`).
+    onset: [f64; 3],
+}
+
+impl FrictionState {
+    /// The displacements of the joints M_i (base frame, mm) by the friction at the last row
+    /// [`Robot::friction_step`] answered: the segments' tips deflected by the loads.
+    pub fn joints(&self) -> [[f64; 2]; 3] {
+        std::array::from_fn(|i| [self.d[2 * i], self.d[2 * i + 1]])
+    }
+}
+
+/// Why a row's friction could not be found.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FrictionError {
+    /// The links cannot carry the platform's loads (a singular configuration).
+    #[error("friction: the links cannot balance the platform here (singular configuration)")]
+    Singular,
+    /// The iteration did not converge.
+    #[error("friction: the stick-slip iteration did not converge")]
+    NoConvergence,
+}
+
+/// A segment's axial compliance, as a share of its bending compliance (the trace of its tip
+/// compliance): [`Robot::small_loads`].
+const AXIAL: f64 = 1e-6;
+
+/// The segments' tip stiffness (block diagonal, N/mm) of their tip compliances `c` (base
+/// frame, mm/N): the inverses, each with a small axial compliance ([`AXIAL`]); `None` where one
+/// is not positive definite.
+fn stiffness_of(c: &[[[f64; 2]; 2]; 3]) -> Option<MD> {
+    let mut k = MD::zeros();
+    for (i, c) in c.iter().enumerate() {
+        let mut c = *c;
+        // A straight inextensible segment does not yield along its axis (its compliance is
+        // singular there): a real one does, slightly. Its stiffness is taken as a million times
+        // the bending's, which keeps the equilibrium's Hessian regular and moves nothing
+        // measurably.
+        let axial = AXIAL * (c[0][0] + c[1][1]);
+        c[0][0] += axial;
+        c[1][1] += axial;
+        let det = c[0][0] * c[1][1] - c[0][1] * c[1][0];
+        if !(det > 0.0) {
+            return None;
+        }
+        // Symmetrised (the quadrature's compliance is symmetric to rounding).
+        let off = 0.5 * (c[0][1] + c[1][0]);
+        k[(2 * i, 2 * i)] = c[1][1] / det;
+        k[(2 * i + 1, 2 * i + 1)] = c[0][0] / det;
+        k[(2 * i, 2 * i + 1)] = -off / det;
+        k[(2 * i + 1, 2 * i)] = -off / det;
+    }
+    Some(k)
+}
+
+/// Nodes of the table of a segment's dimensionless tip compliance over its bending, +-180 deg.
+const TABLE: usize = 4096;
+
+/// A base-frame compliance (xx, xy, yy) of `leg` in the leg's frame.
+fn local(leg: &crate::leg::Leg, c: [f64; 3]) -> [f64; 3] {
+    let (cp, sp) = (leg.cos_psi, leg.sin_psi);
+    let (a, b, d) = (c[0], c[1], c[2]);
+    [
+        cp * cp * a + 2.0 * cp * sp * b + sp * sp * d,
+        -cp * sp * (a - d) + (cp * cp - sp * sp) * b,
+        sp * sp * a - 2.0 * cp * sp * b + cp * cp * d,
+    ]
+}
+
+/// The dimensionless tip compliance (xx, xy, yy in the leg's frame, times EI / l_C^3) of a
+/// segment bent by `theta`, from the table; `None` beyond +-180 deg.
+fn shape_compliance(theta: f64) -> Option<[f64; 3]> {
+    static NODES: std::sync::OnceLock<Vec<[f64; 3]>> = std::sync::OnceLock::new();
+    let pi = std::f64::consts::PI;
+    if !(theta.abs() <= pi) {
+        return None;
+    }
+    let nodes = NODES.get_or_init(|| {
+        let r = Robot::nominal();
+        let leg = &r.legs[0];
+        let (ei, l) = (1.0, leg.l_c);
+        let s = ei / l.powi(3);
+        (0..=TABLE)
+            .map(|k| {
+                let theta = -pi + 2.0 * pi * k as f64 / TABLE as f64;
+                let c = r.tip_compliance(0, theta / l, ei);
+                local(
+                    leg,
+                    [c[0][0] * s, 0.5 * (c[0][1] + c[1][0]) * s, c[1][1] * s],
+                )
+            })
+            .collect()
+    });
+    let u = (theta + pi) / (2.0 * pi) * TABLE as f64;
+    let k = (u.floor() as usize).min(TABLE - 1);
+    let w = u - k as f64;
+    let (a, b) = (nodes[k], nodes[k + 1]);
+    Some(std::array::from_fn(|c| a[c] + w * (b[c] - a[c])))
+}
+
+/// Newton iterations of one row at most.
+const ITERATIONS: usize = 50;
+
+impl Robot {
+    /// The small-load statics at the rigid pose `pose` of the curvatures `kappa`
+    /// ([`SmallLoads`]); `None` at a singular configuration.
+    pub fn small_loads(&self, pose: &Pose, kappa: &[f64; 3], ei: f64) -> Option<SmallLoads> {
+        let k = self.tip_stiffness(kappa, ei)?;
+        self.small_loads_displaced(pose, kappa, &[[0.0; 2]; 3], &k)
+    }
+
+    /// The segments' tip stiffness (block diagonal, N/mm): the inverses of their tip
+    /// compliances, each with a small axial compliance ([`AXIAL`]); `None` where one is not
+    /// positive definite.
+    fn tip_stiffness(&self, kappa: &[f64; 3], ei: f64) -> Option<MD> {
+        stiffness_of(&std::array::from_fn(|i| {
+            self.tip_compliance_tabulated(i, kappa[i], ei)
+        }))
+    }
+
+    /// [`Robot::tip_compliance`] from a table: the compliance of a segment whose tip tangent is
+    /// held is `l_C^3 / EI` times a function of its bending `kappa l_C` alone (in the leg's
+    /// frame), tabulated once over +-180 deg and interpolated linearly (within 1e-6 of the
+    /// quadrature's: a test holds it).
+    pub fn tip_compliance_tabulated(&self, i: usize, kappa: f64, ei: f64) -> [[f64; 2]; 2] {
+        let leg = &self.legs[i];
+        let theta = kappa * leg.l_c;
+        let c = shape_compliance(theta).unwrap_or_else(|| {
+            // Beyond the table (beyond the bending range): the quadrature itself.
+            let k = self.tip_compliance(i, kappa, ei);
+            let s = ei / leg.l_c.powi(3);
+            local(
+                leg,
+                [k[0][0] * s, 0.5 * (k[0][1] + k[1][0]) * s, k[1][1] * s],
+            )
+        });
+        let s = leg.l_c.powi(3) / ei;
+        // R c R^T with R the leg's rotation.
+        let (cp, sp) = (leg.cos_psi, leg.sin_psi);
+        let (a, b, d) = (c[0] * s, c[1] * s, c[2] * s);
+        let xx = cp * cp * a - 2.0 * cp * sp * b + sp * sp * d;
+        let xy = cp * sp * (a - d) + (cp * cp - sp * sp) * b;
+        let yy = sp * sp * a + 2.0 * cp * sp * b + cp * cp * d;
+        [[xx, xy], [xy, yy]]
+    }
+
+    /// [`Robot::small_loads`] at a configuration whose joints M_i are displaced by `dm` from
+    /// the arcs' (the segments deflected, their tip tangents held) and whose platform is at
+    /// `pose`, with the segments' tip stiffness `k`.
+    fn small_loads_displaced(
+        &self,
+        pose: &Pose,
+        kappa: &[f64; 3],
+        dm: &[[f64; 2]; 3],
+        k: &MD,
+    ) -> Option<SmallLoads> {
+        let mut x0 = VE::zeros();
+        let mut u = [[0.0; 2]; 3];
+        let mut r = [[0.0; 2]; 3];
+        for i in 0..3 {
+            let m = g::add(self.joint_m(i, kappa[i]), dm[i]);
+            let p = self.joint_p(i, pose);
+            let t = self.legs[i].tangent(kappa[i]);
+            let pe = g::sub(p, [pose.x, pose.y]);
+            let (gamma, zeta) = (
+                g::signed_angle(t, g::sub(p, m)),
+                g::signed_angle(pe, g::sub(m, p)),
+            );
+            x0[i] = gamma;
+            x0[3 + i] = zeta;
+            x0[6 + 2 * i] = m[0];
+            x0[7 + 2 * i] = m[1];
+            x0[12 + 2 * i] = p[0];
+            x0[13 + 2 * i] = p[1];
+            u[i] = g::scale(1.0 / self.legs[i].l_st, g::sub(p, m));
+            r[i] = g::sub(p, [pose.x, pose.y]);
+        }
+        // The rigid links keep their lengths: u_i . (dP_i - d_i) = 0 with dP_i = dp + dphi
+        // R(90) r_i, the rows (u_i, r_i x u_i).
+        let w = nalgebra::Matrix3::from_fn(|i, c| match c {
+            0 => u[i][0],
+            1 => u[i][1],
+            _ => g::cross(r[i], u[i]),
+        });
+        let wi = w.try_inverse()?;
+        let mut h = SMatrix::<f64, 3, DOF>::zeros();
+        for i in 0..3 {
+            for c in 0..3 {
+                h[(c, 2 * i)] = wi[(c, i)] * u[i][0];
+                h[(c, 2 * i + 1)] = wi[(c, i)] * u[i][1];
+            }
+        }
+        let mut t = MT::zeros();
+        for i in 0..3 {
+            let n = g::perp(u[i]);
+            let pr = g::perp(r[i]);
+            let l_st = self.legs[i].l_st;
+            for col in 0..DOF {
+                let dp = [
+                    h[(0, col)] + h[(2, col)] * pr[0],
+                    h[(1, col)] + h[(2, col)] * pr[1],
+                ];
+                let dm = [
+                    if col == 2 * i { 1.0 } else { 0.0 },
+                    if col == 2 * i + 1 { 1.0 } else { 0.0 },
+                ];
+                // The link turns by n . (dP - dM) / l_st; gamma with it (the tip tangent is
+                // held), zeta with it less the platform's turn.
+                let turn = g::dot(n, g::sub(dp, dm)) / l_st;
+                t[(i, col)] = turn;
+                t[(3 + i, col)] = turn - h[(2, col)];
+                t[(6 + 2 * i, col)] = dm[0];
+                t[(7 + 2 * i, col)] = dm[1];
+                t[(12 + 2 * i, col)] = dp[0];
+                t[(13 + 2 * i, col)] = dp[1];
+            }
+        }
+        Some(SmallLoads { x0, t, h, k: *k })
+    }
+
+    /// One row of a path through friction: the rigid pose `pose` of the curvatures `kappa`,
+    /// the elements' anchors in `state` (updated: the elements that slipped follow). Returns
+    /// the pose's change by the friction (x mm, y mm, phi rad). The first row of a path (a
+    /// new `state`) starts every element unloaded at its place; a row at rest (the same pose
+    /// and curvatures as the last) keeps the last row's answer.
+    pub fn friction_step(
+        &self,
+        f: &Friction,
+        pose: &Pose,
+        kappa: &[f64; 3],
+        state: &mut FrictionState,
+    ) -> Result<[f64; 3], FrictionError> {
+        let here = [pose.x, pose.y, pose.phi];
+        if let Some((p, k, out)) = state.last {
+            if p == here && k == *kappa {
+                return Ok(out);
+            }
+        }
+        let stiffness = self
+            .tip_stiffness(kappa, f.ei)
+            .ok_or(FrictionError::Singular)?;
+        let sl = self
+            .small_loads_displaced(pose, kappa, &[[0.0; 2]; 3], &stiffness)
+            .ok_or(FrictionError::Singular)?;
+        let (Some(anchors), false) = (state.anchors, f.is_off()) else {
+            state.anchors = Some(sl.x0.into());
+            state.d = [0.0; DOF];
+            state.last = Some((here, *kappa, [0.0; 3]));
+            return Ok([0.0; 3]);
+        };
+        let a = VE::from(anchors);
+        let d1 = equilibrium(f, &sl, &a, VD::from(state.d))?;
+        // Second order: the structure's answer from no load to `d1` taken at its midpoint (the
+        // platform and the joints M_i half-way), where the links' directions and levers are
+        // those of half the loads.
+        let p1 = sl.h * d1;
+        let half = Pose::new(
+            pose.x + 0.5 * p1[0],
+            pose.y + 0.5 * p1[1],
+            pose.phi + 0.5 * p1[2],
+        );
+        let dm: [[f64; 2]; 3] = std::array::from_fn(|i| [0.5 * d1[2 * i], 0.5 * d1[2 * i + 1]]);
+        // (The segments' own stiffening or softening under the link forces, their tangent
+        // compliance at half the tip forces, changed nothing measurable on the sweep's
+        // recordings, from a tenth to ten times the prototype's friction, at twice the cost.)
+        let sl = match self.small_loads_displaced(&half, kappa, &dm, &stiffness) {
+            Some(mid) => SmallLoads { x0: sl.x0, ..mid },
+            None => sl,
+        };
+        let d = equilibrium(f, &sl, &a, d1)?;
+        // The elements that slipped take their anchors along.
+        let next = slipped(f, &(sl.x0 + sl.t * d), &a);
+        state.anchors = Some(next.into());
+        state.d = d.into();
+        let p = sl.h * d;
+        let out = [p[0], p[1], p[2]];
+        state.last = Some((here, *kappa, out));
+        Ok(out)
+    }
+
+    /// The derivatives of [`Robot::friction_step`]'s answer with respect to the joints' and the
+    /// supports' limits where both are zero (x mm, y mm, phi rad per N mm of joint couple, and
+    /// per N of support force): with vanishing loads the structure no longer moves the
+    /// elements, each element's load is its limit times the stop operator of its pre-sliding
+    /// travel on its rigid coordinate (`f`'s limits are not read), and the structure answers
+    /// those loads. `state` carries the anchors (a state of its own, not one of
+    /// [`Robot::friction_step`]'s).
+    pub fn friction_onset(
+        &self,
+        f: &Friction,
+        pose: &Pose,
+        kappa: &[f64; 3],
+        state: &mut FrictionState,
+    ) -> Result<[[f64; 3]; 2], FrictionError> {
+        let here = [pose.x, pose.y, pose.phi];
+        if let Some((p, k, _)) = state.last {
+            if p == here && k == *kappa {
+                let (dj, ds) = (state.d, state.onset);
+                return Ok([[dj[0], dj[1], dj[2]], ds]);
+            }
+        }
+        let stiffness = self
+            .tip_stiffness(kappa, f.ei)
+            .ok_or(FrictionError::Singular)?;
+        let sl = self
+            .small_loads_displaced(pose, kappa, &[[0.0; 2]; 3], &stiffness)
+            .ok_or(FrictionError::Singular)?;
+        let unit = Friction {
+            joint_torque: 1.0,
+            support_force: 1.0,
+            ..*f
+        };
+        let a = VE::from(state.anchors.unwrap_or(sl.x0.into()));
+        let (l, _) = element_laws(&unit, &sl.x0, &a);
+        let ch = sl.k.cholesky().ok_or(FrictionError::Singular)?;
+        let answer = |l: VE| -> [f64; 3] {
+            let p = sl.h * ch.solve(&sl.t.tr_mul(&l));
+            [p[0], p[1], p[2]]
+        };
+        let mut lj = l;
+        let mut ls = l;
+        lj.rows_mut(6, 12).fill(0.0);
+        ls.rows_mut(0, 6).fill(0.0);
+        let (dj, ds) = (answer(lj), answer(ls));
+        state.anchors = Some(slipped(&unit, &sl.x0, &a).into());
+        state.d = [dj[0], dj[1], dj[2], 0.0, 0.0, 0.0];
+        state.onset = ds;
+        state.last = Some((here, *kappa, [0.0; 3]));
+        Ok([dj, ds])
+    }
+}
+
+/// The anchors `a` after the elements moved to `x`: those that slipped follow, each to its
+/// pre-sliding travel behind its coordinate.
+fn slipped(f: &Friction, x: &VE, a: &VE) -> VE {
+    let mut next = *a;
+    if f.joint_torque > 0.0 {
+        let lim = f.joint_presliding;
+        for e in 0..6 {
+            let s = x[e] - a[e];
+            if s.abs() > lim {
+                next[e] = x[e] - s.signum() * lim;
+            }
+        }
+    }
+    if f.support_force > 0.0 {
+        let lim = f.support_presliding;
+        for p in 0..6 {
+            let (ix, iy) = (6 + 2 * p, 7 + 2 * p);
+            let s = [x[ix] - a[ix], x[iy] - a[iy]];
+            let n = (s[0] * s[0] + s[1] * s[1]).sqrt();
+            if n > lim {
+                next[ix] = x[ix] - s[0] * lim / n;
+                next[iy] = x[iy] - s[1] * lim / n;
+            }
+        }
+    }
+    next
+}
+
+/// The tip displacements of the equilibrium of the small-load statics `sl` with the elements
+/// anchored at `a`, from `d`: the minimum of the potential energy of the segments and the
+/// elements, `1/2 d^T k d + sum_e phi_e(x_e(d) - a_e)` (convex, once differentiable), by
+/// Newton's method with a line search on the energy's slope along the step (its gradient's
+/// projection, which rounding does not blur as it does the energy's values, whose segments'
+/// stiff axial terms cancel).
+fn equilibrium(f: &Friction, sl: &SmallLoads, a: &VE, mut d: VD) -> Result<VD, FrictionError> {
+    let gradient = |d: &VD| -> (VD, Tangent) {
+        let x = sl.x0 + sl.t * d;
+        let (l, tan) = element_laws(f, &x, a);
+        // k d - t^T L.
+        (sl.k * d - sl.t.tr_mul(&l), tan)
+    };
+    let (mut grad, mut dl) = gradient(&d);
+    for _ in 0..ITERATIONS {
+        let hess = hessian(sl, &dl);
+        let Some(ch) = hess.cholesky() else {
+            break;
+        };
+        let step = -ch.solve(&grad);
+        // The full step says how far the solution is.
+        if step.amax() < 1e-8 {
+            return Ok(d + step);
+        }
+        // The slope along the step at s: negative at 0, increasing (convexity). The whole step
+        // where the slope is still not positive at its end; otherwise the slope's zero by
+        // regula falsi (Illinois) on [0, 1].
+        let slope0 = grad.dot(&step);
+        let (g1, dl1) = gradient(&(d + step));
+        let slope1 = g1.dot(&step);
+        if slope1 <= 0.0 || !slope0.is_finite() {
+            d += step;
+            (grad, dl) = (g1, dl1);
+            // The tips' forces balance to a nanonewton: within 1e-8 mm of the solution for
+            // segments of 0.1 N/mm and more.
+            if grad.amax() < 1e-9 {
+                return Ok(d);
+            }
+            continue;
+        }
+        let (mut lo, mut flo, mut hi, mut fhi) = (0.0, slope0, 1.0, slope1);
+        let mut side = 0;
+        let mut best = (0.5, None);
+        for _ in 0..12 {
+            let s = (lo * fhi - hi * flo) / (fhi - flo);
+            let (gs, dls) = gradient(&(d + step * s));
+            let fs = gs.dot(&step);
+            best = (s, Some((gs, dls)));
+            if fs.abs() <= 0.1 * slope0.abs() {
+                break;
+            }
+            if fs < 0.0 {
+                (lo, flo) = (s, fs);
+                if side == -1 {
+                    fhi *= 0.5;
+                }
+                side = -1;
+            } else {
+                (hi, fhi) = (s, fs);
+                if side == 1 {
+                    flo *= 0.5;
+                }
+                side = 1;
+            }
+        }
+        let (s, gd) = best;
+        d += step * s;
+        (grad, dl) = gd.unwrap_or_else(|| gradient(&d));
+    }
+    Err(FrictionError::NoConvergence)
+}
+
+/// The elements' stiffness where they stick or slip (the negative of d L / d x): a number
+/// per joint, a symmetric 2x2 block (xx, xy, yy) per support.
+#[derive(Clone, Copy)]
+struct Tangent {
+    joints: [f64; 6],
+    supports: [[f64; 3]; 6],
+}
+
+/// The elements' loads for their coordinates `x` and anchors `a`, and their tangent stiffness.
+fn element_laws(f: &Friction, x: &VE, a: &VE) -> (VE, Tangent) {
+    let mut l = VE::zeros();
+    let mut t = Tangent {
+        joints: [0.0; 6],
+        supports: [[0.0; 3]; 6],
+    };
+    let (tj, fs) = (f.joint_torque, f.support_force);
+    if tj > 0.0 {
+        let kj = tj / f.joint_presliding;
+        for e in 0..6 {
+            let v = kj * (x[e] - a[e]);
+            if v.abs() <= tj {
+                l[e] = -v;
+                t.joints[e] = kj;
+            } else {
+                l[e] = -tj * v.signum();
+            }
+        }
+    }
+    if fs > 0.0 {
+        let ks = fs / f.support_presliding;
+        for p in 0..6 {
+            let (ix, iy) = (6 + 2 * p, 7 + 2 * p);
+            let v = [ks * (x[ix] - a[ix]), ks * (x[iy] - a[iy])];
+            let n = (v[0] * v[0] + v[1] * v[1]).sqrt();
+            if n <= fs {
+                l[ix] = -v[0];
+                l[iy] = -v[1];
+                t.supports[p] = [ks, 0.0, ks];
+            } else {
+                let u = [v[0] / n, v[1] / n];
+                l[ix] = -fs * u[0];
+                l[iy] = -fs * u[1];
+                // -d(-fs v/|v|)/dx = (fs ks / |v|) (I - u u^T).
+                let s = fs * ks / n;
+                t.supports[p] = [
+                    s * (1.0 - u[0] * u[0]),
+                    -s * u[0] * u[1],
+                    s * (1.0 - u[1] * u[1]),
+                ];
+            }
+        }
+    }
+    (l, t)
+}
+
+/// The Hessian of the potential energy: `k + t^T D t`, D the elements' tangent stiffness
+/// (block diagonal: the sums run over the elements' rows of `t`).
+fn hessian(sl: &SmallLoads, tan: &Tangent) -> MD {
+    let mut h = sl.k;
+    for (e, &kj) in tan.joints.iter().enumerate() {
+        if kj != 0.0 {
+            let r = sl.t.row(e);
+            h += (r.transpose() * r) * kj;
+        }
+    }
+    for (p, b) in tan.supports.iter().enumerate() {
+        if b[0] != 0.0 || b[2] != 0.0 {
+            let (rx, ry) = (sl.t.row(6 + 2 * p), sl.t.row(7 + 2 * p));
+            let (rxt, ryt) = (rx.transpose(), ry.transpose());
+            h += (rxt * rx) * b[0] + (rxt * ry + ryt * rx) * b[1] + (ryt * ry) * b[2];
+        }
+    }
+    h
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::statics::Loads;
+
+    fn at(pose: Pose) -> (Robot, Pose, [f64; 3]) {
+        let r = Robot::nominal();
+        let kappa = r.ik(&pose).unwrap().kappa;
+        (r, pose, kappa)
+    }
+
+    const EI: f64 = 6.5e4;
+
+    fn unloaded(ei: f64) -> Loads {
+        Loads {
+            ei,
+            force: [0.0; 2],
+            couple: 0.0,
+            k_m: 0.0,
+            k_p: 0.0,
+        }
+    }
+
+    /// A force at P_1 on the platform answers as the large-deflection solver's force at E with
+    /// the couple of its lever: the platform's equilibrium and the segments' compliance agree
+    /// with [`crate::statics`] to first order.
+    #[test]
+    fn a_support_force_at_p_moves_the_platform_as_the_loaded_solver_says() {
+        for pose in [
+            Pose::default(),
+            Pose::from_mm_deg(20.0, -10.0, 5.0),
+            Pose::from_mm_deg(-30.0, 20.0, -8.0),
+        ] {
+            let (r, pose, kappa) = at(pose);
+            let sl = r.small_loads(&pose, &kappa, EI).unwrap();
+            for (fx, fy) in [(0.02, 0.0), (0.0, -0.02)] {
+                let mut l = [0.0; ELEMENTS];
+                l[12] = fx;
+                l[13] = fy;
+                let (_, _, lin) = sl.answer(&l);
+                let p1 = r.joint_p(0, &pose);
+                let rr = g::sub(p1, [pose.x, pose.y]);
+                let loads = Loads {
+                    force: [fx, fy],
+                    couple: g::cross(rr, [fx, fy]),
+                    ..unloaded(EI)
+                };
+                let eq = r.fk_loaded(&kappa, &loads, &pose).unwrap();
+                let big = [
+                    eq.pose.x - pose.x,
+                    eq.pose.y - pose.y,
+                    eq.pose.phi - pose.phi,
+                ];
+                for c in 0..3 {
+                    let scale = if c == 2 { 1e-4 } else { 0.02 };
+                    assert!(
+                        (lin[c] - big[c]).abs() < 0.01 * big[c].abs().max(scale),
+                        "pose {pose:?} component {c}: small-load {} against {}",
+                        lin[c],
+                        big[c]
+                    );
+                }
+            }
+        }
+    }
+
+    /// Couples in the joints answer as weak joint springs do in the loaded solver (a spring is
+    /// a couple -k (angle - rest) at the configuration; a weak one barely moves it).
+    #[test]
+    fn joint_couples_move_the_platform_as_weak_springs_do() {
+        let (r, pose, kappa) = at(Pose::from_mm_deg(25.0, 15.0, 6.0));
+        let rest = r.home_joint_angles();
+        let sl = r.small_loads(&pose, &kappa, EI).unwrap();
+        for (k_m, k_p) in [(0.5, 0.0), (0.0, 0.5)] {
+            let mut l = [0.0; ELEMENTS];
+            for i in 0..3 {
+                let (gamma, zeta) = r.joint_angles(i, &pose, kappa[i]);
+                l[i] = -k_m * (gamma - rest[i].0);
+                l[3 + i] = -k_p * (zeta - rest[i].1);
+            }
+            let (_, _, lin) = sl.answer(&l);
+            let loads = Loads {
+                k_m,
+                k_p,
+                ..unloaded(EI)
+            };
+            let eq = r.fk_loaded(&kappa, &loads, &pose).unwrap();
+            let big = [
+                eq.pose.x - pose.x,
+                eq.pose.y - pose.y,
+                eq.pose.phi - pose.phi,
+            ];
+            assert!(
+                big[0].abs() + big[1].abs() > 1e-3,
+                "the springs move the platform: {big:?}"
+            );
+            for c in 0..3 {
+                let scale = if c == 2 { 1e-5 } else { 1e-3 };
+                assert!(
+                    (lin[c] - big[c]).abs() < 0.02 * big[c].abs().max(scale),
+                    "k_M {k_m}, k_P {k_p}, component {c}: small-load {} against {}",
+                    lin[c],
+                    big[c]
+                );
+            }
+        }
+    }
+
+    /// The loads do work on the elements' coordinates only through the segments (Maxwell-Betti):
+    /// the compliance of the coordinates, t k^-1 t^T, is symmetric and positive semi-definite.
+    #[test]
+    fn the_compliance_of_the_elements_is_symmetric() {
+        let (r, pose, kappa) = at(Pose::from_mm_deg(-20.0, 10.0, -4.0));
+        let sl = r.small_loads(&pose, &kappa, EI).unwrap();
+        let c = sl.t * sl.k.try_inverse().unwrap() * sl.t.transpose();
+        let asym = (c - c.transpose()).amax();
+        assert!(asym < 1e-9 * c.amax(), "asymmetry {asym}");
+        let eig = c.symmetric_eigenvalues();
+        assert!(eig.min() > -1e-9 * c.amax());
+    }
+
+    /// Near the workspace's edge the platform turns easily, and a load's second-order answer
+    /// shows: at phi = -10 deg, 0.3 N at P_1 turns the platform 5 % more or less than the first
+    /// order says, with either sign of the force. The answer taken again at the midpoint of the
+    /// deflection keeps within a third of the first order's miss (and within 2 % of the turn).
+    #[test]
+    fn the_midpoint_answer_follows_the_large_deflection_solver() {
+        let r = Robot::nominal();
+        for pose in [
+            Pose::from_mm_deg(0.0, 0.0, -10.0),
+            Pose::from_mm_deg(0.0, 40.0, -10.0),
+        ] {
+            let kappa = r.ik(&pose).unwrap().kappa;
+            let k = r.tip_stiffness(&kappa, EI).unwrap();
+            let sl = r
+                .small_loads_displaced(&pose, &kappa, &[[0.0; 2]; 3], &k)
+                .unwrap();
+            for fy in [0.3, -0.3] {
+                let mut l = [0.0; ELEMENTS];
+                l[13] = fy;
+                let (d1, _, p1) = sl.answer(&l);
+                let half = Pose::new(
+                    pose.x + 0.5 * p1[0],
+                    pose.y + 0.5 * p1[1],
+                    pose.phi + 0.5 * p1[2],
+                );
+                let dm: [[f64; 2]; 3] =
+                    std::array::from_fn(|i| [0.5 * d1[2 * i], 0.5 * d1[2 * i + 1]]);
+                let mid = r.small_loads_displaced(&half, &kappa, &dm, &k).unwrap();
+                let (_, _, p2) = mid.answer(&l);
+                let rr = g::sub(r.joint_p(0, &pose), [pose.x, pose.y]);
+                let loads = Loads {
+                    force: [0.0, fy],
+                    couple: g::cross(rr, [0.0, fy]),
+                    ..unloaded(EI)
+                };
+                let big = r.fk_loaded(&kappa, &loads, &pose).unwrap().pose.phi - pose.phi;
+                let (e1, e2) = ((p1[2] - big).abs(), (p2[2] - big).abs());
+                assert!(
+                    e1 > 0.03 * big.abs(),
+                    "the first order misses: {e1} of {big}"
+                );
+                assert!(
+                    e2 < e1 / 3.0 && e2 < 0.02 * big.abs(),
+                    "{pose:?} {fy}: midpoint {} first {} solver {}",
+                    p2[2],
+                    p1[2],
+                    big
+                );
+            }
+        }
+    }
+
+    fn path(r: &Robot, poses: &[Pose], f: &Friction) -> Vec<[f64; 3]> {
+        let mut st = FrictionState::default();
+        poses
+            .iter()
+            .map(|p| {
+                let kappa = r.ik(p).unwrap().kappa;
+                r.friction_step(f, p, &kappa, &mut st).unwrap()
+            })
+            .collect()
+    }
+
+    fn line(from: Pose, to: Pose, n: usize) -> Vec<Pose> {
+        (0..=n)
+            .map(|k| {
+                let s = k as f64 / n as f64;
+                Pose::new(
+                    from.x + s * (to.x - from.x),
+                    from.y + s * (to.y - from.y),
+                    from.phi + s * (to.phi - from.phi),
+                )
+            })
+            .collect()
+    }
+
+    fn prototype() -> Friction {
+        Friction {
+            joint_torque: 2.0,
+            joint_presliding: 1e-3,
+            support_force: 0.04,
+            support_presliding: 5e-3,
+            ei: EI,
+        }
+    }
+
+    /// Friction makes the pose depend on the way to it: the same pose reached from either side
+    /// is off by opposite deflections (the hysteresis), a path back over the same poses does
+    /// not retrace the way out, and a row at rest keeps its deflection.
+    #[test]
+    fn the_pose_depends_on_the_way_to_it() {
+        let r = Robot::nominal();
+        let f = prototype();
+        let (a, b, c) = (
+            Pose::from_mm_deg(-20.0, 0.0, 0.0),
+            Pose::from_mm_deg(0.0, 0.0, 0.0),
+            Pose::from_mm_deg(20.0, 0.0, 0.0),
+        );
+        let mut from_left = line(a, b, 40);
+        from_left.extend(line(b, b, 5));
+        let mut from_right = line(c, b, 40);
+        from_right.extend(line(b, b, 5));
+        let (l, rr) = (path(&r, &from_left, &f), path(&r, &from_right, &f));
+        let (dl, dr) = (l[l.len() - 1], rr[rr.len() - 1]);
+        // Along x the friction holds the platform back: it arrives short of the pose.
+        assert!(dl[0] < -0.05 && dr[0] > 0.05, "{dl:?} {dr:?}");
+        assert!(
+            (dl[0] + dr[0]).abs() < 0.2 * dl[0].abs(),
+            "nearly symmetric: {dl:?} {dr:?}"
+        );
+        // At rest the deflection stays.
+        assert_eq!(l[l.len() - 1], l[l.len() - 5]);
+        // Out and back over the same poses: the way back is not the way out.
+        let mut there_and_back = line(a, c, 40);
+        there_and_back.extend(line(c, a, 40));
+        let d = path(&r, &there_and_back, &f);
+        let (out, back) = (d[20], d[60]);
+        assert!((out[0] - back[0]).abs() > 0.1, "{out:?} {back:?}");
+        // No friction, no deflection; twice the friction, about twice the deflection.
+        let off = Friction {
+            joint_torque: 0.0,
+            support_force: 0.0,
+            ..f
+        };
+        assert!(path(&r, &from_left, &off).iter().all(|d| *d == [0.0; 3]));
+        let double = Friction {
+            joint_torque: 4.0,
+            support_force: 0.08,
+            ..f
+        };
+        let d2 = path(&r, &from_left, &double);
+        let ratio = d2[d2.len() - 1][0] / dl[0];
+        assert!((1.8..2.2).contains(&ratio), "{ratio}");
+    }
+
+    /// The table of the segments' compliance is the quadrature's, on every leg, across the
+    /// bending range.
+    #[test]
+    fn the_tabulated_tip_compliance_is_the_quadrature() {
+        let mut cfg = pcr_robot::RobotConfig::nominal();
+        cfg.legs[1].l_c_mm = 118.0;
+        let r = Robot::new(&cfg).unwrap();
+        for i in 0..3 {
+            for k in -60..=60 {
+                let kappa = k as f64 * 0.0004;
+                let (a, b) = (
+                    r.tip_compliance(i, kappa, EI),
+                    r.tip_compliance_tabulated(i, kappa, EI),
+                );
+                let scale = a[0][0].abs() + a[1][1].abs();
+                for (ra, rb) in a.iter().zip(&b) {
+                    for (x, y) in ra.iter().zip(rb) {
+                        assert!(
+                            (x - y).abs() < 1e-6 * scale,
+                            "leg {i} kappa {kappa}: {a:?} {b:?}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    /// The onset columns are the derivatives of the answer at zero friction: a path with a
+    /// millionth of the prototype's limits answers a millionth of them, joints and supports
+    /// apart (at a ten-thousandth the stuck supports' coupling through the segments' compliance,
+    /// about 10 mm/N at the tip, already shows by 1 % after a reversal).
+    #[test]
+    fn the_onset_is_the_derivative_at_zero_friction() {
+        let r = Robot::nominal();
+        let mut poses = line(
+            Pose::from_mm_deg(-20.0, 5.0, 2.0),
+            Pose::from_mm_deg(15.0, -5.0, -3.0),
+            30,
+        );
+        poses.extend(line(
+            Pose::from_mm_deg(15.0, -5.0, -3.0),
+            Pose::from_mm_deg(0.0, 10.0, 0.0),
+            30,
+        ));
+        let p = prototype();
+        let s = 1e-6;
+        let joints = Friction {
+            support_force: 0.0,
+            joint_torque: s * p.joint_torque,
+            ..p
+        };
+        let supports = Friction {
+            joint_torque: 0.0,
+            support_force: s * p.support_force,
+            ..p
+        };
+        let (dj, ds) = (path(&r, &poses, &joints), path(&r, &poses, &supports));
+        let mut st = FrictionState::default();
+        for (k, pose) in poses.iter().enumerate() {
+            let kappa = r.ik(pose).unwrap().kappa;
+            let [oj, os] = r.friction_onset(&p, pose, &kappa, &mut st).unwrap();
+            for c in 0..3 {
+                let (ej, es) = (oj[c] * s * p.joint_torque, os[c] * s * p.support_force);
+                let tol = |e: f64| 0.005 * e.abs() + 1e-13;
+                assert!(
+                    (ej - dj[k][c]).abs() < tol(ej),
+                    "row {k} joints {c}: {ej} {}",
+                    dj[k][c]
+                );
+                assert!(
+                    (es - ds[k][c]).abs() < tol(es),
+                    "row {k} supports {c}: {es} {}",
+                    ds[k][c]
+                );
+            }
+        }
+        assert!(
+            dj[60][0].abs() > 1e-9 && ds[60][0].abs() > 1e-9,
+            "{:?} {:?}",
+            dj[60],
+            ds[60]
+        );
+    }
+}

@@ -1,0 +1,402 @@
+//! `friction`: Coulomb friction of the passive joints and of their supports on the base plate.
+//! Each joint (M_i and P_i) and each joint's support is an elastic-perfectly-plastic element
+//! that sticks until its load reaches its limit and then slips; the segments bend under those
+//! loads, so that the pose depends on the path that led to it: a hysteresis in the platform's
+//! pose, like a play but acting on the pose through the structure's compliance rather than on
+//! the motors (`[effects.friction]`; the small-load statics of `pcr_kinematics::friction`). The
+//! two limits (one per joint, one per support) are fitted; the pre-sliding travels and the
+//! segments' bending stiffness are assumed (the robot file's, or the library's defaults). The
+//! chain's IK feeds the deflection the path predicts forward.
+//!
+//! The fit is linearised at the model's friction: from none, through the derivatives at zero
+//! friction (each element's stop operator on its rigid coordinate, the structure answering
+//! its limit: [`crate::model::ExtendedModel::friction_onset_path`]), then by forward
+//! differences of the whole path at the estimate, re-linearised while the step is large. Stuck
+//! supports hold their joints against the segments' compliance, which the derivatives at zero
+//! friction do not see, so that the first step's estimate is far from the friction's own; the
+//! re-linearised steps reach it.
+
+use super::joint_fit::{fit_joint, nuisance_change};
+use super::{lerp, Effect, Parameter};
+use crate::context::Context;
+use crate::extension::Extension;
+use crate::fitted::{Estimate, Fitted};
+use crate::linear::Columns;
+use pcr_kinematics::friction::Friction as Rubbing;
+use pcr_robot::effects::{self as robot, Effects};
+use pcr_robot::RobotConfig;
+use rayon::prelude::*;
+
+/// The `friction` candidate.
+#[derive(Debug)]
+pub struct Friction;
+
+/// Re-linearisations of a fit from no friction at most (each a pass over every row of every
+/// series and one per limit).
+const RELINEARISATIONS: usize = 4;
+
+/// A fit's step is re-linearised while it moves a value by more than this share of it.
+const STEP_SHARE: f64 = 0.05;
+
+/// A limit's estimate must be this many standard errors above zero for the fit from no friction
+/// to be re-linearised (otherwise the data show no friction and the first step stands).
+const SIGNIFICANT: f64 = 3.0;
+
+/// The friction entry of a robot file's effects, with zero limits and the assumed pre-sliding
+/// travels and bending stiffness (the compliance's, when the file declares one) when it
+/// declares none.
+fn held(effects: &Effects) -> robot::Friction {
+    effects.friction.clone().unwrap_or_else(|| robot::Friction {
+        joint_torque_n_mm: 0.0,
+        support_force_n: 0.0,
+        joint_presliding_rad: robot::Friction::default_joint_presliding(),
+        support_presliding_mm: robot::Friction::default_support_presliding(),
+        ei_n_mm2: effects
+            .compliance
+            .as_ref()
+            .map_or(robot::Friction::default_ei(), |c| c.ei_n_mm2),
+    })
+}
+
+/// The fitted values of a friction entry: the joints' couple (N mm), the supports' force (N)
+/// and the joints' pre-sliding travel (rad).
+type Theta = [f64; 3];
+
+/// `entry` with the fitted values `theta`.
+fn with_values(entry: &robot::Friction, theta: Theta) -> robot::Friction {
+    robot::Friction {
+        joint_torque_n_mm: theta[0],
+        support_force_n: theta[1],
+        joint_presliding_rad: theta[2],
+        ..entry.clone()
+    }
+}
+
+/// The fitted values of `entry`.
+fn values_of(entry: &robot::Friction) -> Theta {
+    [
+        entry.joint_torque_n_mm,
+        entry.support_force_n,
+        entry.joint_presliding_rad,
+    ]
+}
+
+/// Each context row's friction deflection at `entry` (x, y mm and the weighted phi, mm), from
+/// the context's rigid paths; `None` where a row has none.
+fn deflections(ctx: &Context, entry: &robot::Friction) -> Vec<Option<[f64; 3]>> {
+    let started = std::time::Instant::now();
+    let f = Rubbing::from_effect(entry);
+    let paths = ctx.paths();
+    let per: Vec<Vec<Option<[f64; 3]>>> = paths
+        .par_iter()
+        .map(|(rigid, kappa)| {
+            if f.is_off() {
+                vec![Some([0.0; 3]); rigid.len()]
+            } else {
+                ctx.model.friction_path(rigid, kappa, &f)
+            }
+        })
+        .collect();
+    tracing::debug!(
+        seconds = started.elapsed().as_secs_f64(),
+        "friction path of a fit"
+    );
+    ctx.rows
+        .iter()
+        .map(|r| per[r.s][r.k].map(|d| [d[0], d[1], ctx.w_phi * d[2]]))
+        .collect()
+}
+
+/// Columns of the fitted values, in the solver's units: N mm, N / 100 (the two limits' steps of
+/// one order), mrad.
+const SCALE: Theta = [1.0, 0.01, 1e-3];
+
+/// One linearised step of a fit.
+struct Step {
+    fit: crate::effects::joint_fit::JointFit,
+    /// The step of each fitted value (zero for one not fitted) and its standard error.
+    x: Theta,
+    sd: [Option<f64>; 3],
+}
+
+/// One linearised fit of the friction with the calibration parameters about `theta` (the
+/// context's model holds `at`: its residuals already take that friction's deflection). From no
+/// friction the columns of the limits are their derivatives at zero (the pre-sliding travel
+/// has none there, and keeps its value); elsewhere forward differences of the whole path, the
+/// joints' pre-sliding travel among them while the joints rub.
+fn step_at(
+    ctx: &Context,
+    train: &[usize],
+    entry: &robot::Friction,
+    at: &[Option<[f64; 3]>],
+    theta: Theta,
+) -> Option<Step> {
+    let n = ctx.rows.len();
+    let rubs = theta[0] != 0.0 || theta[1] != 0.0;
+    let free: Vec<usize> = if !rubs {
+        vec![0, 1]
+    } else if theta[0] > 0.0 {
+        vec![0, 1, 2]
+    } else {
+        vec![0, 1]
+    };
+    let diff = |a: Option<[f64; 3]>, b: Option<[f64; 3]>| match (a, b) {
+        (Some(a), Some(b)) => [a[0] - b[0], a[1] - b[1], a[2] - b[2]],
+        _ => [0.0; 3],
+    };
+    // Per row: the change from the model's friction to `theta` (the offset), and the columns.
+    let (offset, cols): (Vec<[f64; 3]>, Vec<Vec<[f64; 3]>>) = if !rubs {
+        let f = Rubbing::from_effect(&with_values(entry, theta));
+        let paths = ctx.paths();
+        let per: Vec<Vec<Option<[[f64; 3]; 2]>>> = paths
+            .par_iter()
+            .map(|(rigid, kappa)| ctx.model.friction_onset_path(rigid, kappa, &f))
+            .collect();
+        let cols = ctx
+            .rows
+            .iter()
+            .map(|r| {
+                per[r.s][r.k].map_or(vec![[0.0; 3]; 2], |c| {
+                    c.iter().map(|d| [d[0], d[1], ctx.w_phi * d[2]]).collect()
+                })
+            })
+            .collect();
+        let offset = (0..n).map(|i| diff(Some([0.0; 3]), at[i])).collect();
+        (offset, cols)
+    } else {
+        let h: Theta = [
+            0.02 * theta[0].abs().max(1.0),
+            0.02 * theta[1].abs().max(0.02),
+            0.05 * theta[2],
+        ];
+        let mut points = vec![theta];
+        for &j in &free {
+            let mut t = theta;
+            t[j] += h[j];
+            points.push(t);
+        }
+        let runs: Vec<Vec<Option<[f64; 3]>>> = points
+            .par_iter()
+            .map(|t| deflections(ctx, &with_values(entry, *t)))
+            .collect();
+        let offset = (0..n).map(|i| diff(runs[0][i], at[i])).collect();
+        let cols = (0..n)
+            .map(|i| {
+                free.iter()
+                    .enumerate()
+                    .map(|(c, &j)| diff(runs[c + 1][i], runs[0][i]).map(|v| v / h[j]))
+                    .collect()
+            })
+            .collect();
+        (offset, cols)
+    };
+    let n_e = free.len();
+    let effect = |i: usize, c: &mut Columns| {
+        for (a, &j) in free.iter().enumerate() {
+            c[a] = cols[i][a].map(|v| v * SCALE[j]);
+        }
+    };
+    let nui = ctx.nuisance().nui.clone();
+    let moved = offset.iter().any(|o| *o != [0.0; 3]);
+    let fit = fit_joint(ctx, &nui, train, n_e, &effect, moved.then_some(&offset[..]))?;
+    let mut x = [0.0; 3];
+    let mut sd = [None; 3];
+    for (a, &j) in free.iter().enumerate() {
+        x[j] = fit.0.x[a] * SCALE[j];
+        sd[j] = Some(fit.0.std[a] * SCALE[j]);
+    }
+    Some(Step { fit, x, sd })
+}
+
+/// The values after a step `x` from `theta`: the limits not below zero, the pre-sliding travel
+/// within a quarter and four times its value (a step of a travel that enters through the
+/// elements' kinks).
+fn stepped(theta: Theta, x: Theta) -> Theta {
+    [
+        (theta[0] + x[0]).max(0.0),
+        (theta[1] + x[1]).max(0.0),
+        (theta[2] + x[2]).clamp(0.25 * theta[2], 4.0 * theta[2]),
+    ]
+}
+
+/// The fit of the friction from the context's model's friction: a linearised step,
+/// re-linearised at its estimate while it moves a value by more than [`STEP_SHARE`] (from no
+/// friction only where a limit comes out significant), up to `steps` times.
+fn fit_from(ctx: &Context, train: &[usize], start: Option<Theta>, steps: usize) -> Option<Fitted> {
+    let entry = held(&ctx.model.config.effects);
+    let at = deflections(ctx, &entry);
+    let mut theta = start.unwrap_or(values_of(&entry));
+    let mut step = step_at(ctx, train, &entry, &at, theta)?;
+    for _ in 0..steps {
+        let next = stepped(theta, step.x);
+        let significant = (0..2).any(|j| step.sd[j].is_some_and(|s| step.x[j] > SIGNIFICANT * s));
+        let large = (0..3).any(|j| (next[j] - theta[j]).abs() > STEP_SHARE * next[j].abs());
+        let from_none = theta[0] == 0.0 && theta[1] == 0.0;
+        if !large || (from_none && !significant) || (next[0] == 0.0 && next[1] == 0.0) {
+            break;
+        }
+        theta = next;
+        step = step_at(ctx, train, &entry, &at, theta)?;
+    }
+    let Step { fit, x, sd } = step;
+    let (lin, delta, alone) = fit;
+    let value = [theta[0] + x[0], theta[1] + x[1], stepped(theta, x)[2]];
+    let new = with_values(&entry, value);
+    let presliding = if sd[2].is_some() {
+        "joint pre-sliding"
+    } else {
+        "joint pre-sliding (assumed)"
+    };
+    let params = vec![
+        Estimate::new("joint torque", value[0], sd[0], "N mm"),
+        Estimate::new("support force", value[1], sd[1], "N"),
+        Estimate::new(presliding, value[2], sd[2], "rad"),
+        Estimate::new(
+            "support pre-sliding (assumed)",
+            entry.support_presliding_mm,
+            None,
+            "mm",
+        ),
+        Estimate::new("EI (assumed)", entry.ei_n_mm2, None, "N mm^2"),
+    ];
+    let n_e = lin.x.len() - ctx.nuisance().nui.n.min(lin.x.len());
+    let nuis = nuisance_change(ctx.nuisance().nui.clone(), lin.x.clone(), n_e);
+    Some(Fitted {
+        name: "friction",
+        params,
+        k: n_e,
+        delta,
+        alone,
+        train_sse: lin.sse,
+        change: Box::new(move |c: &mut RobotConfig| {
+            c.effects.friction = Some(new.clone());
+            nuis(c);
+        }),
+    })
+}
+
+impl Extension for Friction {
+    /// The declared friction.
+    fn friction(&self, effects: &Effects) -> Option<Rubbing> {
+        effects.friction.as_ref().map(Rubbing::from_effect)
+    }
+}
+
+impl Effect for Friction {
+    fn name(&self) -> &'static str {
+        "friction"
+    }
+
+    /// The first against the second half of the training time (or one recording against the
+    /// others): each holds moves and static poses. Not the static rows against the moving ones:
+    /// at rest the friction leaves each pose off by what its approach left stuck, a pattern
+    /// over the poses the calibration's geometry takes in large part (it is fitted on those
+    /// poses), so that the static rows alone cannot tell the supports' force from a change of
+    /// the geometry (on the sweep's recordings at 1x: 0.026 +- 0.001 N on the static rows,
+    /// 0.040 on the moving ones and on the whole, noise-free or not).
+    fn consistency(&self) -> super::Parts {
+        super::Parts::Halves
+    }
+
+    fn description(&self) -> &'static str {
+        "friction of the passive joints and their supports: stick-slip hysteresis of the pose through the segments' compliance"
+    }
+
+    /// The joints' and the supports' limits with the calibration parameters, linearised at the
+    /// model's friction and re-linearised at the estimate ([`RELINEARISATIONS`]).
+    fn fit(&self, ctx: &Context, train: &[usize]) -> Option<Fitted> {
+        fit_from(ctx, train, None, RELINEARISATIONS)
+    }
+
+    /// One step from the whole fit's values.
+    fn fit_like(&self, ctx: &Context, train: &[usize], whole: &[Estimate]) -> Option<Fitted> {
+        let get = |n: &str| whole.iter().find(|e| e.name == n).map(|e| e.value);
+        let presliding = get("joint pre-sliding")
+            .or(get("joint pre-sliding (assumed)"))
+            .unwrap_or(held(&ctx.model.config.effects).joint_presliding_rad);
+        let start = get("joint torque")
+            .zip(get("support force"))
+            .map(|(a, b)| [a.max(0.0), b.max(0.0), presliding]);
+        fit_from(ctx, train, start, 1)
+    }
+
+    fn declared(&self, effects: &Effects, _fitted: &[Estimate]) -> Option<Vec<Estimate>> {
+        effects.friction.as_ref().map(|f| {
+            vec![
+                Estimate::new("joint torque", f.joint_torque_n_mm, None, "N mm"),
+                Estimate::new("support force", f.support_force_n, None, "N"),
+                Estimate::new("joint pre-sliding", f.joint_presliding_rad, None, "rad"),
+                Estimate::new(
+                    "support pre-sliding (assumed)",
+                    f.support_presliding_mm,
+                    None,
+                    "mm",
+                ),
+                Estimate::new("EI (assumed)", f.ei_n_mm2, None, "N mm^2"),
+            ]
+        })
+    }
+
+    fn remove(&self, effects: &mut Effects, _params: &[Estimate]) {
+        effects.friction = None;
+    }
+
+    fn file_position(&self) -> u8 {
+        9
+    }
+
+    /// The joints' couple (N mm), the supports' force (in 0.01 N) and the joints' pre-sliding
+    /// travel (mrad), when the file declares friction.
+    fn parameters(&self, effects: &Effects) -> Vec<Parameter> {
+        if effects.friction.is_none() {
+            return Vec::new();
+        }
+        (0..3)
+            .map(|j| Parameter {
+                get: |e, j| {
+                    e.friction
+                        .as_ref()
+                        .map_or(0.0, |f| values_of(f)[j] / SCALE[j])
+                },
+                set: |e, j, x| {
+                    if let Some(f) = e.friction.as_mut() {
+                        let mut v = values_of(f);
+                        v[j] = x * SCALE[j];
+                        *f = with_values(f, v);
+                    }
+                },
+                index: j,
+                lo: if j == 2 { 0.01 } else { 0.0 },
+                hi: if j == 2 { 50.0 } else { 1000.0 },
+                moves_curvatures: false,
+                along_path: true,
+            })
+            .collect()
+    }
+
+    fn blend(&self, old: &RobotConfig, new: &mut RobotConfig, s: f64) {
+        if let Some(f) = new.effects.friction.as_mut() {
+            let (t0, f0) = old
+                .effects
+                .friction
+                .as_ref()
+                .map_or((0.0, 0.0), |o| (o.joint_torque_n_mm, o.support_force_n));
+            f.joint_torque_n_mm = lerp(t0, f.joint_torque_n_mm, s);
+            f.support_force_n = lerp(f0, f.support_force_n, s);
+            if let Some(o) = &old.effects.friction {
+                f.joint_presliding_rad = lerp(o.joint_presliding_rad, f.joint_presliding_rad, s);
+            }
+        }
+    }
+
+    /// Negative limits: friction that pushes along the motion.
+    fn unphysical(&self, effects: &Effects, _max_change: f64) -> Option<String> {
+        let f = effects.friction.as_ref()?;
+        (f.joint_torque_n_mm < 0.0 || f.support_force_n < 0.0).then(|| {
+            format!(
+                "negative friction (joints {:.3} N mm, supports {:.4} N)",
+                f.joint_torque_n_mm, f.support_force_n
+            )
+        })
+    }
+}
