@@ -101,6 +101,9 @@ pub(crate) const SEARCH_ROWS: usize = 3000;
 /// reach the same cost in 3 or 4.
 const FIRST_RADIUS: f64 = 100.0;
 
+/// Most re-linearisations of the friction in one refinement ([`FrozenFriction`]).
+const FRICTION_RELINEARISATIONS: usize = 2;
+
 /// Most evaluations of the model in a refinement of the search (7-13 reach the tolerance).
 const MAX_EVALUATIONS: usize = 200;
 
@@ -747,7 +750,37 @@ pub(crate) fn refine_with_errors(
         ..Options::default()
     };
     let started = std::time::Instant::now();
-    let fit = lsq::solve(&mut p, &x0, &lo, &hi, &opts);
+    let mut fit = lsq::solve(&mut p, &x0, &lo, &hi, &opts);
+    // The friction linearised at the start holds its path where the parameters that move the
+    // curvatures left it (a play of 5.4 steps refined to 3 moves every reversal by more than a
+    // step): linearised again where the refinement arrived and refined from there, while they
+    // move.
+    for _ in 0..FRICTION_RELINEARISATIONS {
+        let Ok(f) = &fit else { break };
+        let moved = p.friction.is_some()
+            && p.slots.iter().enumerate().any(|(k, s)| {
+                s.moves_curvatures && (f.x[k] - x0[k]).abs() > 1e-3 * x0[k].abs().max(1.0)
+            });
+        if !moved {
+            break;
+        }
+        let here = p.config(&f.x);
+        let Some(frozen) = FrozenFriction::new(&here, like, &p.slots, series, &p.rows) else {
+            break;
+        };
+        let start = f.x.clone();
+        p.friction = Some(frozen);
+        let again = lsq::solve(&mut p, &start, &lo, &hi, &opts);
+        let done = again.as_ref().is_ok_and(|g| {
+            p.slots.iter().enumerate().all(|(k, s)| {
+                !s.moves_curvatures || (g.x[k] - start[k]).abs() <= 1e-3 * start[k].abs().max(1.0)
+            })
+        });
+        fit = again;
+        if done {
+            break;
+        }
+    }
     tracing::debug!(
         rows = n,
         parameters = x0.len(),

@@ -1,0 +1,75 @@
+//! Timing of the friction's history (`Robot::friction_step`) along a series of 2000 consecutive
+//! rows that reverse direction (a Lissajous path of 40 mm and 6 deg), at a tenth, once, three
+//! and ten times the prototype's friction (2 N mm per joint, 0.04 N per support), and of its
+//! derivatives at zero friction (`Robot::friction_onset`), with a checksum of the deflections to
+//! compare builds. Per row: the minimum over 8 repeats. Run:
+//! `cargo bench -p pcr-kinematics --bench friction`.
+
+use pcr_kinematics::friction::{Friction, FrictionState};
+use pcr_kinematics::{Pose, Robot};
+use std::hint::black_box;
+use std::time::Instant;
+
+fn main() {
+    let r = Robot::nominal();
+    let s: Vec<([f64; 3], Pose)> = (0..2000)
+        .filter_map(|k| {
+            let t = k as f64 * 0.004;
+            let p = Pose::from_mm_deg(
+                40.0 * (1.1 * t).cos(),
+                40.0 * (1.7 * t).sin(),
+                6.0 * (1.3 * t).sin(),
+            );
+            r.ik(&p).ok().map(|ik| (ik.kappa, p))
+        })
+        .collect();
+    for scale in [0.1, 1.0, 3.0, 10.0] {
+        let f = Friction {
+            joint_torque: 2.0 * scale,
+            joint_presliding: 1e-3,
+            support_force: 0.04 * scale,
+            support_presliding: 5e-3,
+            ei: 6.5e4,
+        };
+        let mut best = f64::INFINITY;
+        let mut sum = 0.0;
+        for _ in 0..8 {
+            let t0 = Instant::now();
+            let mut st = FrictionState::default();
+            sum = 0.0;
+            for (kappa, p) in &s {
+                let d = r.friction_step(&f, p, black_box(kappa), &mut st).unwrap();
+                sum += d[0].abs() + d[1].abs() + d[2].abs();
+            }
+            best = best.min(t0.elapsed().as_secs_f64());
+        }
+        println!(
+            "friction_step {:>4}x: {:6.2} us/row (checksum {sum:.9e})",
+            scale,
+            1e6 * best / s.len() as f64
+        );
+    }
+    let f = Friction {
+        joint_torque: 2.0,
+        joint_presliding: 1e-3,
+        support_force: 0.04,
+        support_presliding: 5e-3,
+        ei: 6.5e4,
+    };
+    let mut best = f64::INFINITY;
+    let mut sum = 0.0;
+    for _ in 0..8 {
+        let t0 = Instant::now();
+        let mut st = FrictionState::default();
+        sum = 0.0;
+        for (kappa, p) in &s {
+            let d = r.friction_onset(&f, p, black_box(kappa), &mut st).unwrap();
+            sum += d.iter().flatten().map(|v| v.abs()).sum::<f64>();
+        }
+        best = best.min(t0.elapsed().as_secs_f64());
+    }
+    println!(
+        "friction_onset     : {:6.2} us/row (checksum {sum:.9e})",
+        1e6 * best / s.len() as f64
+    );
+}
