@@ -38,7 +38,12 @@ impl IkStep {
             .as_ref()
             .map(Friction::from_effect)
             .filter(|f| !f.is_off())
-            .map(|f| (f, FrictionState::default()));
+            .map(|f| {
+                // The segments' compliance table is built here, not in the first cycle
+                // (`step` allocates nothing).
+                let _ = robot.tip_compliance_tabulated(0, 0.0, f.ei);
+                (f, FrictionState::default())
+            });
         let mut s = Self {
             robot,
             loads,

@@ -192,7 +192,17 @@ fn run(prefix: &str) {
     let sub_hb = cn.subscriber::<Heartbeat>(s::HEARTBEAT).unwrap();
     let pub_cmd = cn.publisher::<Command>(s::COMMAND).unwrap();
 
-    let robot = Robot::nominal();
+    // The IK step compensates the friction it declares (a pass of the friction's history
+    // every cycle): that too allocates nothing.
+    let mut cfg = pcr_robot::RobotConfig::nominal();
+    cfg.effects.friction = Some(pcr_robot::effects::Friction {
+        joint_torque_n_mm: 2.0,
+        support_force_n: 0.04,
+        joint_presliding_rad: 1e-3,
+        support_presliding_mm: 5e-3,
+        ei_n_mm2: 6.5e4,
+    });
+    let robot = Robot::new(&cfg).unwrap();
     let period = 0.02;
     let template = PlannerSource::new(robot.clone(), MotionLimits::default());
     let mut interp = InterpolatorStep::new(template.clone(), Pose::default());

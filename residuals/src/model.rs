@@ -302,6 +302,30 @@ impl ExtendedModel {
             .collect()
     }
 
+    /// [`ExtendedModel::friction_path`] with the derivatives of every row's deflection by the
+    /// friction's fitted values (the joints' couple N mm, the supports' force N, the joints'
+    /// pre-sliding travel rad), in the same pass
+    /// ([`pcr_kinematics::Robot::friction_step_tangent`]).
+    pub fn friction_path_tangent(
+        &self,
+        rigid: &[Option<Pose>],
+        kappa: &[[f64; 3]],
+        f: &Friction,
+    ) -> Vec<Option<([f64; 3], [[f64; 3]; 3])>> {
+        let mut state = FrictionState::default();
+        let mut tangent = pcr_kinematics::friction::FrictionTangent::default();
+        rigid
+            .iter()
+            .zip(kappa)
+            .map(|(p, k)| {
+                let p = p.as_ref()?;
+                self.robot
+                    .friction_step_tangent(f, p, k, &mut state, &mut tangent)
+                    .ok()
+            })
+            .collect()
+    }
+
     /// [`ExtendedModel::friction_path`] with the displacement of the joints M_i at every row
     /// (base frame, mm): what the friction does to the markers a calibration reads.
     pub fn friction_path_with_joints(

@@ -133,7 +133,7 @@ struct Refit<'a> {
 /// refinement's steps are a chord method for it, and the search that calls the refinement
 /// again starts each time from the deflection of its own model.
 struct FrozenFriction {
-    /// The slots of the parameters that act along the path ([`Parameter::along_path`]).
+    /// The slots of the parameters that act along the path (`Parameter::along_path`).
     slots: Vec<usize>,
     /// Their values at the start (solver's units).
     x0: Vec<f64>,
@@ -144,8 +144,9 @@ struct FrozenFriction {
 
 impl FrozenFriction {
     /// The linearisation at `config` on the refined rows `rows` of each series: one pass of the
-    /// friction along every row of each series at the start and one per parameter that acts
-    /// along the path; `None` when none does, or the model has no friction.
+    /// friction along every row of each series with its derivatives
+    /// ([`ExtendedModel::friction_path_tangent`]); `None` when no parameter acts along the path,
+    /// or the model has no friction.
     fn new(
         config: &RobotConfig,
         like: &ExtendedModel,
@@ -153,16 +154,19 @@ impl FrozenFriction {
         series: &[Series],
         rows: &[Vec<usize>],
     ) -> Option<FrozenFriction> {
-        let along: Vec<usize> = (0..slots.len()).filter(|&p| slots[p].along_path).collect();
+        let along: Vec<usize> = (0..slots.len())
+            .filter(|&p| slots[p].along_path.is_some())
+            .collect();
         if along.is_empty() {
             return None;
         }
         let model = ExtendedModel::like(config, like).ok()?;
-        model.friction?;
+        let f = model.friction?;
         let x0: Vec<f64> = along
             .iter()
             .map(|&p| (slots[p].get)(&config.effects, slots[p].index))
             .collect();
+        // The deflection and its derivatives by the friction's values, in one pass a series.
         let per: Vec<Vec<([f64; 3], Vec<[f64; 3]>)>> = series
             .par_iter()
             .zip(rows)
@@ -170,32 +174,15 @@ impl FrozenFriction {
                 let all: Vec<usize> = (0..s.samples.len()).collect();
                 let kappa = model.curvatures(s, &all);
                 let rigid = model.rigid_path(s, &kappa);
-                let at = |m: &ExtendedModel| -> Vec<Option<[f64; 3]>> {
-                    m.friction.map_or(vec![Some([0.0; 3]); all.len()], |f| {
-                        m.friction_path(&rigid, &kappa, &f)
-                    })
-                };
-                let base = at(&model);
-                let moved: Vec<(f64, Vec<Option<[f64; 3]>>)> = along
-                    .iter()
-                    .zip(&x0)
-                    .map(|(&p, &v)| {
-                        let slot = &slots[p];
-                        let h = 0.02 * v.abs().max(1.0);
-                        let mut c = config.clone();
-                        (slot.set)(&mut c.effects, slot.index, v + h);
-                        let m = ExtendedModel::like(&c, &model).ok();
-                        (h, m.map_or_else(|| base.clone(), |m| at(&m)))
-                    })
-                    .collect();
+                let path = model.friction_path_tangent(&rigid, &kappa, &f);
                 rows.iter()
                     .map(|&k| {
-                        let b = base[k].unwrap_or([0.0; 3]);
-                        let cols = moved
+                        let (b, t) = path[k].unwrap_or(([0.0; 3], [[0.0; 3]; 3]));
+                        let cols = along
                             .iter()
-                            .map(|(h, d)| {
-                                let d = d[k].unwrap_or(b);
-                                std::array::from_fn(|c| (d[c] - b[c]) / h)
+                            .map(|&p| {
+                                let (j, per_unit) = slots[p].along_path.unwrap_or((0, 0.0));
+                                t[j.min(2)].map(|v| v * per_unit)
                             })
                             .collect();
                         (b, cols)

@@ -210,7 +210,7 @@ impl Effect for Backlash {
                 lo: 0.0,
                 hi: 50.0,
                 moves_curvatures: true,
-                along_path: false,
+                along_path: None,
             })
             .collect()
     }

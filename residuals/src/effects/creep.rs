@@ -187,7 +187,7 @@ impl Effect for Creep {
                 lo: -0.5,
                 hi: 0.5,
                 moves_curvatures: true,
-                along_path: false,
+                along_path: None,
             })
             .collect();
         v.push(Parameter {
@@ -201,7 +201,7 @@ impl Effect for Creep {
             lo: 0.5f64.ln(),
             hi: 5000f64.ln(),
             moves_curvatures: true,
-            along_path: false,
+            along_path: None,
         });
         v
     }

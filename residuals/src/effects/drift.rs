@@ -146,7 +146,7 @@ impl Effect for Drift {
                 lo: -1e3,
                 hi: 1e3,
                 moves_curvatures: true,
-                along_path: false,
+                along_path: None,
             })
             .collect()
     }

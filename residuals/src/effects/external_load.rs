@@ -95,7 +95,7 @@ impl Effect for ExternalLoad {
                 lo: -50.0,
                 hi: 50.0,
                 moves_curvatures: false,
-                along_path: false,
+                along_path: None,
             })
             .collect()
     }

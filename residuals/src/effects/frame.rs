@@ -151,7 +151,7 @@ impl Effect for Frame {
                 lo: -50.0,
                 hi: 50.0,
                 moves_curvatures: false,
-                along_path: false,
+                along_path: None,
             })
             .collect()
     }

@@ -4,17 +4,18 @@
 //! loads, so that the pose depends on the path that led to it: a hysteresis in the platform's
 //! pose, like a play but acting on the pose through the structure's compliance rather than on
 //! the motors (`[effects.friction]`; the small-load statics of `pcr_kinematics::friction`). The
-//! two limits (one per joint, one per support) are fitted; the pre-sliding travels and the
-//! segments' bending stiffness are assumed (the robot file's, or the library's defaults). The
-//! chain's IK feeds the deflection the path predicts forward.
+//! two limits (one per joint, one per support) and the joints' pre-sliding travel are fitted;
+//! the supports' pre-sliding travel and the segments' bending stiffness are assumed (the robot
+//! file's, or the library's defaults). The chain's IK feeds the deflection the path predicts
+//! forward.
 //!
 //! The fit is linearised at the model's friction: from none, through the derivatives at zero
 //! friction (each element's stop operator on its rigid coordinate, the structure answering
 //! its limit: [`crate::model::ExtendedModel::friction_onset_path`]), then by forward
 //! differences of the whole path at the estimate, re-linearised while the step is large. Stuck
 //! supports hold their joints against the segments' compliance, which the derivatives at zero
-//! friction do not see, so that the first step's estimate is far from the friction's own; the
-//! re-linearised steps reach it.
+//! friction do not see, so that the first step's estimate is far from the friction's own (the
+//! joints' couple at about half its value); the re-linearised steps reach it.
 
 use super::joint_fit::{fit_joint, nuisance_change};
 use super::{lerp, Effect, Parameter};
@@ -32,10 +33,14 @@ use rayon::prelude::*;
 pub struct Friction;
 
 /// Re-linearisations of a fit from no friction at most (each a pass over every row of every
-/// series and one per limit).
+/// series with the derivatives).
 const RELINEARISATIONS: usize = 4;
 
 /// A fit's step is re-linearised while it moves a value by more than this share of it.
+
+/// The share of the training error (what the calibration parameters alone leave) a first step
+/// from no friction must take off for the fit to be re-linearised.
+const ONSET_GAIN: f64 = 0.1;
 const STEP_SHARE: f64 = 0.05;
 
 /// A limit's estimate must be this many standard errors above zero for the fit from no friction
@@ -122,8 +127,8 @@ struct Step {
 /// One linearised fit of the friction with the calibration parameters about `theta` (the
 /// context's model holds `at`: its residuals already take that friction's deflection). From no
 /// friction the columns of the limits are their derivatives at zero (the pre-sliding travel
-/// has none there, and keeps its value); elsewhere forward differences of the whole path, the
-/// joints' pre-sliding travel among them while the joints rub.
+/// has none there, and keeps its value); elsewhere the derivatives of the whole path at
+/// `theta` (the tangent pass), the joints' pre-sliding travel among them while the joints rub.
 fn step_at(
     ctx: &Context,
     train: &[usize],
@@ -166,27 +171,23 @@ fn step_at(
         let offset = (0..n).map(|i| diff(Some([0.0; 3]), at[i])).collect();
         (offset, cols)
     } else {
-        let h: Theta = [
-            0.02 * theta[0].abs().max(1.0),
-            0.02 * theta[1].abs().max(0.02),
-            0.05 * theta[2],
-        ];
-        let mut points = vec![theta];
-        for &j in &free {
-            let mut t = theta;
-            t[j] += h[j];
-            points.push(t);
-        }
-        let runs: Vec<Vec<Option<[f64; 3]>>> = points
+        // The deflection at `theta` and its derivatives, in one pass along each series.
+        let f = Rubbing::from_effect(&with_values(entry, theta));
+        let paths = ctx.paths();
+        let per: Vec<Vec<Option<([f64; 3], [[f64; 3]; 3])>>> = paths
             .par_iter()
-            .map(|t| deflections(ctx, &with_values(entry, *t)))
+            .map(|(rigid, kappa)| ctx.model.friction_path_tangent(rigid, kappa, &f))
             .collect();
-        let offset = (0..n).map(|i| diff(runs[0][i], at[i])).collect();
+        let w = |d: [f64; 3]| [d[0], d[1], ctx.w_phi * d[2]];
+        let at_theta: Vec<Option<([f64; 3], [[f64; 3]; 3])>> =
+            ctx.rows.iter().map(|r| per[r.s][r.k]).collect();
+        let offset = (0..n)
+            .map(|i| diff(at_theta[i].map(|(d, _)| w(d)), at[i]))
+            .collect();
         let cols = (0..n)
             .map(|i| {
                 free.iter()
-                    .enumerate()
-                    .map(|(c, &j)| diff(runs[c + 1][i], runs[0][i]).map(|v| v / h[j]))
+                    .map(|&j| at_theta[i].map_or([0.0; 3], |(_, t)| w(t[j])))
                     .collect()
             })
             .collect();
@@ -239,6 +240,12 @@ fn fit_from(
     let mut theta = start.unwrap_or(values_of(&entry));
     let mut bound = [false, false, !free_presliding];
     let mut step = step_at(ctx, train, &entry, &at, theta, bound)?;
+    // The training error the calibration parameters alone leave (what a friction's step must
+    // improve on).
+    let sse0 = || {
+        let nui = ctx.nuisance().nui.clone();
+        fit_joint(ctx, &nui, train, 0, &|_, _| {}, None).map_or(ctx.sse(train, None), |f| f.0.sse)
+    };
     let mut left = steps;
     loop {
         if let Some(j) = (0..2).find(|&j| !bound[j] && theta[j] + step.x[j] < 0.0) {
@@ -258,7 +265,12 @@ fn fit_from(
         let significant = (0..2).any(|j| step.sd[j].is_some_and(|s| step.x[j] > SIGNIFICANT * s));
         let large = (0..3).any(|j| (next[j] - theta[j]).abs() > STEP_SHARE * next[j].abs());
         let from_none = theta[0] == 0.0 && theta[1] == 0.0;
-        if !large || (from_none && !significant) {
+        // From no friction, a first step that takes less than a tenth of what the calibration
+        // parameters alone leave is not worth the passes of the re-linearisation: such a candidate does not win
+        // its round, and one the model takes in is refined by its acceptance's steps (a
+        // periodic error or a play of the sweep half-imitated by the first step took a second
+        // or two of every round before).
+        if !large || (from_none && !(significant && step.fit.0.sse < (1.0 - ONSET_GAIN) * sse0())) {
             break;
         }
         theta = next;
@@ -398,7 +410,7 @@ impl Effect for Friction {
                 lo: if j == 2 { 0.01 } else { 0.0 },
                 hi: if j == 2 { 50.0 } else { 1000.0 },
                 moves_curvatures: false,
-                along_path: true,
+                along_path: Some((j, SCALE[j])),
             })
             .collect()
     }

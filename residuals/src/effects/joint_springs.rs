@@ -98,7 +98,7 @@ impl Effect for JointSprings {
                 lo: -100.0,
                 hi: 100.0,
                 moves_curvatures: false,
-                along_path: false,
+                along_path: None,
             })
             .collect()
     }

@@ -115,7 +115,7 @@ impl Effect for Latency {
             lo: -0.2,
             hi: 1.0,
             moves_curvatures: true,
-            along_path: false,
+            along_path: None,
         }]
     }
 

@@ -86,10 +86,12 @@ pub struct Parameter {
     /// with it. A load's or the capture frame's does not: a refinement's Jacobian takes the
     /// curvatures at the point for it instead of running those stages over every row again.
     pub moves_curvatures: bool,
-    /// Whether it acts through a pass along every row of the series in order (the friction's
-    /// history), which a refinement linearises at its start rather than running at each of its
-    /// evaluations ([`crate::refine`]).
-    pub along_path: bool,
+    /// Whether it acts through the pass of the friction along every row of the series in order
+    /// (its history), which a refinement linearises at its start rather than running at each of
+    /// its evaluations ([`crate::refine`]): which of the friction's fitted values it is (the
+    /// column of `pcr_kinematics::Robot::friction_step_tangent`) and how much of that value one
+    /// unit of the solver's is.
+    pub along_path: Option<(usize, f64)>,
 }
 
 /// Which independent parts of the training rows a candidate's parameters are compared on

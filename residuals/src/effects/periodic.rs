@@ -280,7 +280,7 @@ impl Effect for Periodic {
                 lo: -50.0,
                 hi: 50.0,
                 moves_curvatures: true,
-                along_path: false,
+                along_path: None,
             });
             v.push(Parameter {
                 get: |e, k| e.periodic[k].phase_deg,
@@ -289,7 +289,7 @@ impl Effect for Periodic {
                 lo: -720.0,
                 hi: 720.0,
                 moves_curvatures: true,
-                along_path: false,
+                along_path: None,
             });
         }
         v
