@@ -273,7 +273,7 @@ fn stiffness_of(c: &[[[f64; 2]; 2]; 3]) -> Option<MD> {
         c[0][0] += axial;
         c[1][1] += axial;
         let det = c[0][0] * c[1][1] - c[0][1] * c[1][0];
-        if !(det > 0.0) {
+        if det.is_nan() || det <= 0.0 {
             return None;
         }
         // Symmetrised (the quadrature's compliance is symmetric to rounding).
@@ -305,7 +305,7 @@ fn local(leg: &crate::leg::Leg, c: [f64; 3]) -> [f64; 3] {
 fn shape_compliance(theta: f64) -> Option<[f64; 3]> {
     static NODES: std::sync::OnceLock<Vec<[f64; 3]>> = std::sync::OnceLock::new();
     let pi = std::f64::consts::PI;
-    if !(theta.abs() <= pi) {
+    if theta.is_nan() || theta.abs() > pi {
         return None;
     }
     let nodes = NODES.get_or_init(|| {

@@ -299,7 +299,13 @@ fn attribute_from<'a>(
         if let Some(sd) = &slot_std {
             for (n, e) in crate::refine::reported_errors(&config.effects, sd, &a.name, &a.params) {
                 if let Some(p) = a.params.iter_mut().find(|p| p.name == n) {
-                    p.std = p.std.map(|s| s.max(e));
+                    // A value its round held (a limit at its bound) that the refinements
+                    // moved states the final estimate's error; an assumed one none.
+                    p.std = match p.std {
+                        Some(s) => Some(s.max(e)),
+                        None if e > 0.0 => Some(e),
+                        None => None,
+                    };
                 }
             }
         }

@@ -164,6 +164,10 @@ pub fn disagreements(whole: &[Estimate], a: &[Estimate], b: &[Estimate]) -> Vec<
                     && diff > Z * sa.hypot(sb)
                     && diff > REL * larger
             }
+            // Fitted in the parts, held in the whole fit (a limit its bound held at zero,
+            // which the acceptance's refinement then moved): apart by Z combined errors and
+            // by REL of the larger.
+            (None, Some(sa), Some(sb)) => diff > Z * sa.hypot(sb) && diff > REL * larger,
             // A searched or fixed one (a motor, a period): the same value.
             (None, _, _) => diff > 0.02 * larger.max(1e-12),
             _ => false,

@@ -181,10 +181,23 @@ pub(crate) fn scaled_pinv(m: &DMatrix<f64>) -> Option<(DMatrix<f64>, Vec<f64>)> 
         return None;
     }
     let n = m.nrows();
+    // A column the data do not see at all (a zero diagonal) keeps the scale 1: its row and
+    // column are zero and the pseudo-inverse drops them (a tiny scale would square to zero
+    // and make 0 / 0 of them, on which the decomposition never ends).
     let s: Vec<f64> = (0..n)
-        .map(|a| m[(a, a)].max(0.0).sqrt().max(1e-300))
+        .map(|a| {
+            let d = m[(a, a)];
+            if d > 1e-200 {
+                d.sqrt()
+            } else {
+                1.0
+            }
+        })
         .collect();
     let sa = DMatrix::from_fn(n, n, |a, b| m[(a, b)] / (s[a] * s[b]));
+    if sa.iter().any(|v| !v.is_finite()) {
+        return None;
+    }
     let svd = sa.svd(true, true);
     let tol = svd.singular_values.max() * 1e-10;
     Some((svd.pseudo_inverse(tol).ok()?, s))

@@ -125,6 +125,14 @@ pub struct Sensitivity {
     pub d_loads: [[f64; 3]; 5],
 }
 
+/// A row's friction deflection (x mm, y mm, phi rad) and its derivatives by the friction's
+/// fitted values (the joints' couple N mm, the supports' force N, the joints' pre-sliding
+/// travel rad).
+pub type DeflectionTangent = ([f64; 3], [[f64; 3]; 3]);
+
+/// A row's friction deflection and the displacement of the joints M_i (base frame, mm).
+pub type DeflectionAndJoints = ([f64; 3], [[f64; 2]; 3]);
+
 /// The model of one robot file.
 #[derive(Debug, Clone)]
 pub struct ExtendedModel {
@@ -311,7 +319,7 @@ impl ExtendedModel {
         rigid: &[Option<Pose>],
         kappa: &[[f64; 3]],
         f: &Friction,
-    ) -> Vec<Option<([f64; 3], [[f64; 3]; 3])>> {
+    ) -> Vec<Option<DeflectionTangent>> {
         let mut state = FrictionState::default();
         let mut tangent = pcr_kinematics::friction::FrictionTangent::default();
         rigid
@@ -333,7 +341,7 @@ impl ExtendedModel {
         rigid: &[Option<Pose>],
         kappa: &[[f64; 3]],
         f: &Friction,
-    ) -> Vec<Option<([f64; 3], [[f64; 2]; 3])>> {
+    ) -> Vec<Option<DeflectionAndJoints>> {
         let mut state = FrictionState::default();
         rigid
             .iter()

@@ -81,7 +81,11 @@ pub(crate) fn reported_errors(
         return base
             .iter()
             .zip(var)
-            .filter(|(p, _)| fitted.iter().any(|f| f.name == p.name && f.std.is_some()))
+            .filter(|(p, _)| {
+                fitted.iter().any(|f| {
+                    f.name == p.name && (f.std.is_some() || !f.name.ends_with("(assumed)"))
+                })
+            })
             .map(|(p, v)| (p.name.clone(), v.sqrt()))
             .collect();
     }
@@ -124,6 +128,10 @@ struct Refit<'a> {
     friction: Option<FrozenFriction>,
 }
 
+/// A refined row's friction deflection at the linearisation's start and its derivative by each
+/// parameter that acts along the path.
+type RowLinearisation = ([f64; 3], Vec<[f64; 3]>);
+
 /// The friction's deflection of the refined rows, linearised in the friction's own parameters
 /// at the refinement's start and held there for the other parameters' changes: a pass through
 /// every row of a series (the friction's history) costs as much as a few thousand rows of the
@@ -139,7 +147,7 @@ struct FrozenFriction {
     x0: Vec<f64>,
     /// Per series and refined row: the deflection at the start (x mm, y mm, phi rad), and its
     /// derivative by each of those parameters (solver's units).
-    rows: Vec<Vec<([f64; 3], Vec<[f64; 3]>)>>,
+    rows: Vec<Vec<RowLinearisation>>,
 }
 
 impl FrozenFriction {
@@ -167,7 +175,7 @@ impl FrozenFriction {
             .map(|&p| (slots[p].get)(&config.effects, slots[p].index))
             .collect();
         // The deflection and its derivatives by the friction's values, in one pass a series.
-        let per: Vec<Vec<([f64; 3], Vec<[f64; 3]>)>> = series
+        let per: Vec<Vec<RowLinearisation>> = series
             .par_iter()
             .zip(rows)
             .map(|(s, rows)| {

@@ -201,6 +201,43 @@ fn finds_backlash_and_its_play() {
     );
 }
 
+/// The prototype's friction at three times its value beside its gear play: the two
+/// hysteresis sources are told apart (a play acts on the motors, before the structure; the
+/// friction on the pose through the structure's compliance, stuck elements holding), each with
+/// its parameters, in both readings of the timing.
+#[test]
+fn finds_friction_beside_backlash_and_tells_them_apart() {
+    let mut plant = quiet_plant();
+    plant.stepper.backlash = true;
+    plant.stepper.backlash_steps = [3.0, 4.0, 3.0];
+    plant.friction = PlantConfig::prototype().friction;
+    plant.friction.joint_torque_n_mm *= 3.0;
+    plant.friction.support_force_n *= 3.0;
+    let a = analyse(&RobotConfig::nominal(), &plant);
+    let n = names(&a);
+    assert!(
+        n.contains(&"friction") && n.contains(&"backlash"),
+        "{}",
+        report(&a)
+    );
+    let b = a.robot.effects.backlash.as_ref().unwrap().steps;
+    for (f, t) in b.iter().zip([3.0, 4.0, 3.0]) {
+        assert!((f - t).abs() < 0.3, "{b:?}: {}", report(&a));
+    }
+    let f = a.robot.effects.friction.as_ref().unwrap();
+    assert!(
+        (f.joint_torque_n_mm - 6.0).abs() < 0.9 && (f.support_force_n - 0.12).abs() < 0.012,
+        "{f:?}: {}",
+        report(&a)
+    );
+    assert_eq!(a.verdict, Verdict::Explained, "{}", report(&a));
+    assert!(
+        a.after.position_rms_mm < 0.2 * a.before.position_rms_mm,
+        "{}",
+        report(&a)
+    );
+}
+
 #[test]
 fn another_labs_logger_at_half_the_rate_gives_the_same_backlash() {
     let mut plant = quiet_plant();
@@ -271,6 +308,7 @@ fn an_undeclared_delay_with_backlash_and_friction_is_explained() {
     sorted.iter_mut().for_each(|n| n.sort());
     assert_eq!(sorted[0], sorted[1], "{} vs {}", report(&a), report(&b));
     assert!(names(&b).contains(&"latency"), "{}", report(&b));
+    assert!(names(&b).contains(&"friction"), "{}", report(&b));
     let latency = |x: &Attribution| {
         x.robot
             .effects

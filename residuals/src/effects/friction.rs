@@ -11,8 +11,10 @@
 //!
 //! The fit is linearised at the model's friction: from none, through the derivatives at zero
 //! friction (each element's stop operator on its rigid coordinate, the structure answering
-//! its limit: [`crate::model::ExtendedModel::friction_onset_path`]), then by forward
-//! differences of the whole path at the estimate, re-linearised while the step is large. Stuck
+//! its limit: [`crate::model::ExtendedModel::friction_onset_path`]), then by the
+//! derivatives of the whole path at the estimate in one pass (the tangent pass,
+//! [`crate::model::ExtendedModel::friction_path_tangent`]), re-linearised while the step is
+//! large. Stuck
 //! supports hold their joints against the segments' compliance, which the derivatives at zero
 //! friction do not see, so that the first step's estimate is far from the friction's own (the
 //! joints' couple at about half its value); the re-linearised steps reach it.
@@ -23,6 +25,7 @@ use crate::context::Context;
 use crate::extension::Extension;
 use crate::fitted::{Estimate, Fitted};
 use crate::linear::Columns;
+use crate::model::DeflectionTangent;
 use pcr_kinematics::friction::Friction as Rubbing;
 use pcr_robot::effects::{self as robot, Effects};
 use pcr_robot::RobotConfig;
@@ -35,8 +38,6 @@ pub struct Friction;
 /// Re-linearisations of a fit from no friction at most (each a pass over every row of every
 /// series with the derivatives).
 const RELINEARISATIONS: usize = 4;
-
-/// A fit's step is re-linearised while it moves a value by more than this share of it.
 
 /// The share of the training error (what the calibration parameters alone leave) a first step
 /// from no friction must take off for the fit to be re-linearised.
@@ -140,9 +141,17 @@ fn step_at(
     let n = ctx.rows.len();
     let rubs = theta[0] != 0.0 || theta[1] != 0.0;
     // The values fitted: the limits not held, and the joints' pre-sliding travel where they
-    // rub (it has no derivative at zero friction).
+    // rub (it has no derivative at zero friction). Where the other elements rub, a limit at
+    // zero has no derivative in the tangent pass either (its elements are not there): it is
+    // held.
     let free: Vec<usize> = (0..3)
-        .filter(|&j| !held[j] && (j < 2 || (rubs && theta[0] > 0.0)))
+        .filter(|&j| {
+            !held[j]
+                && match j {
+                    2 => rubs && theta[0] > 0.0,
+                    _ => !rubs || theta[j] > 0.0,
+                }
+        })
         .collect();
     if free.is_empty() {
         return None;
@@ -174,12 +183,12 @@ fn step_at(
         // The deflection at `theta` and its derivatives, in one pass along each series.
         let f = Rubbing::from_effect(&with_values(entry, theta));
         let paths = ctx.paths();
-        let per: Vec<Vec<Option<([f64; 3], [[f64; 3]; 3])>>> = paths
+        let per: Vec<Vec<Option<DeflectionTangent>>> = paths
             .par_iter()
             .map(|(rigid, kappa)| ctx.model.friction_path_tangent(rigid, kappa, &f))
             .collect();
         let w = |d: [f64; 3]| [d[0], d[1], ctx.w_phi * d[2]];
-        let at_theta: Vec<Option<([f64; 3], [[f64; 3]; 3])>> =
+        let at_theta: Vec<Option<DeflectionTangent>> =
             ctx.rows.iter().map(|r| per[r.s][r.k]).collect();
         let offset = (0..n)
             .map(|i| diff(at_theta[i].map(|(d, _)| w(d)), at[i]))
