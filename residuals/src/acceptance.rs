@@ -100,7 +100,8 @@ pub(crate) fn accept<'a>(
         // steps gained 1-3 % each, nine of them, at a loaded prediction of every training row
         // and a loaded nuisance table apiece; stopping there changes its force by a fifth of
         // its error and takes 3 s off 11).
-        if *s > GN_MIN_GAIN * base_sse {
+        let min_gain = effect.map_or(GN_MIN_GAIN, |e| e.acceptance_min_gain());
+        if *s > min_gain * base_sse {
             break;
         }
         step = effect.and_then(|e| e.fit(c, &c.train()));

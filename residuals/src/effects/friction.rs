@@ -345,6 +345,14 @@ impl Effect for Friction {
         super::Parts::Halves
     }
 
+    /// Its acceptance's steps stop below a 15 % gain: each is a pass of the history with its
+    /// derivatives along every row (a third of a second on the sweep's recordings), and at 10x
+    /// the steps after the second gained 5-13 % each, eight of them, where the joint refinement
+    /// that follows (the friction linearised once, `refine::FrozenFriction`) takes the rest.
+    fn acceptance_min_gain(&self) -> f64 {
+        0.85
+    }
+
     fn description(&self) -> &'static str {
         "friction of the passive joints and their supports: stick-slip hysteresis of the pose through the segments' compliance"
     }

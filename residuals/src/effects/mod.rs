@@ -132,6 +132,12 @@ pub trait Effect: Extension {
         true
     }
 
+    /// The share of the training error a Gauss-Newton step of its acceptance must keep at most
+    /// for the next step to be taken (the default: a step gaining less than 3 % is the last).
+    fn acceptance_min_gain(&self) -> f64 {
+        0.97
+    }
+
     /// Whether it is tried again once it is in the model (each acceptance adds another term);
     /// false by default.
     fn repeatable(&self) -> bool {
