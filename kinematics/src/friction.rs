@@ -985,6 +985,29 @@ mod tests {
         }
     }
 
+    /// Three times the prototype's friction.
+    fn three_times() -> Friction {
+        Friction {
+            joint_torque: 6.0,
+            support_force: 0.12,
+            ..prototype()
+        }
+    }
+
+    /// `n` poses of a Lissajous path that reverses (30 mm, 5 deg), `dt` apart in its parameter.
+    fn lissajous(n: usize, dt: f64) -> Vec<Pose> {
+        (0..n)
+            .map(|k| {
+                let t = k as f64 * dt;
+                Pose::from_mm_deg(
+                    30.0 * (1.1 * t).cos(),
+                    30.0 * (1.7 * t).sin(),
+                    5.0 * (1.3 * t).sin(),
+                )
+            })
+            .collect()
+    }
+
     /// Friction makes the pose depend on the way to it: the same pose reached from either side
     /// is off by opposite deflections (the hysteresis), a path back over the same poses does
     /// not retrace the way out, and a row at rest keeps its deflection.
@@ -1124,21 +1147,8 @@ mod tests {
     #[test]
     fn the_row_before_s_midpoint_is_the_row_s_own() {
         let r = Robot::nominal();
-        let f = Friction {
-            joint_torque: 6.0,
-            support_force: 0.12,
-            ..prototype()
-        };
-        let poses: Vec<Pose> = (0..400)
-            .map(|k| {
-                let t = k as f64 * 0.02;
-                Pose::from_mm_deg(
-                    30.0 * (1.1 * t).cos(),
-                    30.0 * (1.7 * t).sin(),
-                    5.0 * (1.3 * t).sin(),
-                )
-            })
-            .collect();
+        let f = three_times();
+        let poses = lissajous(400, 0.02);
         let one = path(&r, &poses, &f);
         // Two solves a row: at the rigid configuration, then at the midpoint of that answer.
         let mut anchors: Option<VE> = None;
@@ -1179,21 +1189,8 @@ mod tests {
     #[test]
     fn the_tangent_is_the_derivative_along_the_path() {
         let r = Robot::nominal();
-        let f = Friction {
-            joint_torque: 6.0,
-            support_force: 0.12,
-            ..prototype()
-        };
-        let poses: Vec<Pose> = (0..300)
-            .map(|k| {
-                let t = k as f64 * 0.01;
-                Pose::from_mm_deg(
-                    30.0 * (1.1 * t).cos(),
-                    30.0 * (1.7 * t).sin(),
-                    5.0 * (1.3 * t).sin(),
-                )
-            })
-            .collect();
+        let f = three_times();
+        let poses = lissajous(300, 0.01);
         let kappas: Vec<[f64; 3]> = poses.iter().map(|p| r.ik(p).unwrap().kappa).collect();
         let mut st = FrictionState::default();
         let mut tan = FrictionTangent::default();

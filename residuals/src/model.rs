@@ -125,6 +125,22 @@ pub struct Sensitivity {
     pub d_loads: [[f64; 3]; 5],
 }
 
+/// `step` along every row of a path in order, from every friction element unloaded at its
+/// first row; `None` where a row has no rigid pose (the elements stay as they were) or `step`
+/// has no answer.
+fn along_path<T>(
+    rigid: &[Option<Pose>],
+    kappa: &[[f64; 3]],
+    mut step: impl FnMut(&Pose, &[f64; 3], &mut FrictionState) -> Option<T>,
+) -> Vec<Option<T>> {
+    let mut state = FrictionState::default();
+    rigid
+        .iter()
+        .zip(kappa)
+        .map(|(p, k)| step(p.as_ref()?, k, &mut state))
+        .collect()
+}
+
 /// A row's friction deflection (x mm, y mm, phi rad) and its derivatives by the friction's
 /// fitted values (the joints' couple N mm, the supports' force N, the joints' pre-sliding
 /// travel rad).
@@ -299,15 +315,9 @@ impl ExtendedModel {
         kappa: &[[f64; 3]],
         f: &Friction,
     ) -> Vec<Option<[f64; 3]>> {
-        let mut state = FrictionState::default();
-        rigid
-            .iter()
-            .zip(kappa)
-            .map(|(p, k)| {
-                let p = p.as_ref()?;
-                self.robot.friction_step(f, p, k, &mut state).ok()
-            })
-            .collect()
+        along_path(rigid, kappa, |p, k, state| {
+            self.robot.friction_step(f, p, k, state).ok()
+        })
     }
 
     /// [`ExtendedModel::friction_path`] with the derivatives of every row's deflection by the
@@ -320,18 +330,12 @@ impl ExtendedModel {
         kappa: &[[f64; 3]],
         f: &Friction,
     ) -> Vec<Option<DeflectionTangent>> {
-        let mut state = FrictionState::default();
         let mut tangent = pcr_kinematics::friction::FrictionTangent::default();
-        rigid
-            .iter()
-            .zip(kappa)
-            .map(|(p, k)| {
-                let p = p.as_ref()?;
-                self.robot
-                    .friction_step_tangent(f, p, k, &mut state, &mut tangent)
-                    .ok()
-            })
-            .collect()
+        along_path(rigid, kappa, |p, k, state| {
+            self.robot
+                .friction_step_tangent(f, p, k, state, &mut tangent)
+                .ok()
+        })
     }
 
     /// [`ExtendedModel::friction_path`] with the displacement of the joints M_i at every row
@@ -342,16 +346,10 @@ impl ExtendedModel {
         kappa: &[[f64; 3]],
         f: &Friction,
     ) -> Vec<Option<DeflectionAndJoints>> {
-        let mut state = FrictionState::default();
-        rigid
-            .iter()
-            .zip(kappa)
-            .map(|(p, k)| {
-                let p = p.as_ref()?;
-                let d = self.robot.friction_step(f, p, k, &mut state).ok()?;
-                Some((d, state.joints()))
-            })
-            .collect()
+        along_path(rigid, kappa, |p, k, state| {
+            let d = self.robot.friction_step(f, p, k, state).ok()?;
+            Some((d, state.joints()))
+        })
     }
 
     /// The derivatives of every row's friction deflection with respect to the joints' and the
@@ -364,15 +362,9 @@ impl ExtendedModel {
         kappa: &[[f64; 3]],
         f: &Friction,
     ) -> Vec<Option<[[f64; 3]; 2]>> {
-        let mut state = FrictionState::default();
-        rigid
-            .iter()
-            .zip(kappa)
-            .map(|(p, k)| {
-                let p = p.as_ref()?;
-                self.robot.friction_onset(f, p, k, &mut state).ok()
-            })
-            .collect()
+        along_path(rigid, kappa, |p, k, state| {
+            self.robot.friction_onset(f, p, k, state).ok()
+        })
     }
 
     /// Stages 1 to 4 of every row of a series: the effective motor positions (steps), the
