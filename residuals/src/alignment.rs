@@ -357,33 +357,34 @@ fn per_block_sse(
         .model
         .effective_steps(s, &latency::with(e, latency::held_s(e) + extra));
     let dir = motion_direction(&q);
-    // Residual after the delay's change, and the columns fitted with it, per row.
+    // Residual after the delay's change, and the columns fitted with it, per row (`m` columns
+    // a row, one after the other: no allocation per row, this runs some sixty times a series).
+    let m = 3 + nuisance.map_or(0, |t| t.nui.n);
     let mut res = Vec::with_capacity(rows.len());
-    let mut cols: Vec<Vec<[f64; 3]>> = Vec::with_capacity(rows.len());
+    let mut cols: Vec<[f64; 3]> = Vec::with_capacity(rows.len() * m);
     for &i in rows {
         let row = &ctx.rows[i];
         let now = ctx.pred(row).q_eff;
         let o = q[row.k];
         let d = motor_delta(ctx, i, [o[0] - now[0], o[1] - now[1], o[2] - now[2]]);
         res.push([row.r[0] - d[0], row.r[1] - d[1], row.r[2] - d[2]]);
-        let mut c: Vec<[f64; 3]> = (0..3)
-            .map(|m| {
-                let mut dq = [0.0; 3];
-                dq[m] = -dir[row.k][m];
-                motor_delta(ctx, i, dq)
-            })
-            .collect();
-        if let Some(t) = nuisance {
-            c.extend_from_slice(&t.cols[i]);
+        for mo in 0..3 {
+            let mut dq = [0.0; 3];
+            dq[mo] = -dir[row.k][mo];
+            cols.push(motor_delta(ctx, i, dq));
         }
-        cols.push(c);
+        if let Some(t) = nuisance {
+            debug_assert_eq!(t.cols[i].len(), t.nui.n);
+            cols.extend_from_slice(&t.cols[i]);
+        }
     }
-    let beta = least_squares(&res, &cols);
+    let beta = least_squares(&res, &cols, m);
     let mut out = vec![0.0; blocks.len()];
     for (n, &i) in rows.iter().enumerate() {
         let b = blocks.binary_search(&ctx.rows[i].block).unwrap_or(0);
+        let c = &cols[n * m..(n + 1) * m];
         for a in 0..3 {
-            let fit: f64 = cols[n].iter().zip(&beta).map(|(c, x)| c[a] * x).sum();
+            let fit: f64 = c.iter().zip(&beta).map(|(c, x)| c[a] * x).sum();
             out[b] += (res[n][a] - fit).powi(2);
         }
     }
@@ -408,13 +409,12 @@ fn motion_direction(q: &[[f64; 3]]) -> Vec<[f64; 3]> {
         .collect()
 }
 
-/// The coefficients that best fit `res` by the columns `cols` (least squares on equilibrated
-/// columns, with a tiny ridge so that an empty column, e.g. a motor that never moved, gets 0).
-fn least_squares(res: &[[f64; 3]], cols: &[Vec<[f64; 3]>]) -> Vec<f64> {
-    let m = cols.first().map_or(0, Vec::len);
+/// The coefficients that best fit `res` by the columns `cols` (`m` a row, one row after the
+/// other; least squares on equilibrated columns, with a tiny ridge so that an empty column, e.g. a motor that never moved, gets 0).
+fn least_squares(res: &[[f64; 3]], cols: &[[f64; 3]], m: usize) -> Vec<f64> {
     let mut a = nalgebra::DMatrix::<f64>::zeros(m, m);
     let mut b = nalgebra::DVector::<f64>::zeros(m);
-    for (r, c) in res.iter().zip(cols) {
+    for (r, c) in res.iter().zip(cols.chunks_exact(m.max(1))) {
         for j in 0..m {
             for k in j..m {
                 a[(j, k)] += c[j][0] * c[k][0] + c[j][1] * c[k][1] + c[j][2] * c[k][2];

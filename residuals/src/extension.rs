@@ -30,6 +30,14 @@ pub trait Extension: Debug + Sync {
     /// on the path the motors took, changed in place.
     fn play(&self, _effects: &Effects, _q: &mut [[f64; 3]]) {}
 
+    /// Whether [`Extension::play`] changes anything under `effects` (an effect that overrides
+    /// it says so): without a play, a row's motor outputs depend on the commands about it
+    /// alone, and some rows' can be computed without the whole series'
+    /// ([`crate::model::ExtendedModel::effective_steps_at`]).
+    fn plays(&self, _effects: &Effects) -> bool {
+        false
+    }
+
     /// Stage 4, tendons: the tendon displacements the segments see (mm, one entry per row of
     /// `series`), changed in place.
     fn tendons(&self, _effects: &Effects, _series: &Series, _dl: &mut [[f64; 3]]) {}

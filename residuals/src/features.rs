@@ -192,21 +192,24 @@ pub fn links(ctx: &Context, feats: &Features, train: &[usize], test: &[usize]) -
         let mut ss_before = 0.0;
         let mut ss_after = 0.0;
         let mut best_corr = (0.0f64, 0usize);
+        // Standardise the feature on the training rows.
+        let fv = |i: usize| feats.values[i][j];
+        let n = train.len() as f64;
+        let mean = train.iter().map(|&i| fv(i)).sum::<f64>() / n;
+        let sd = (train.iter().map(|&i| (fv(i) - mean).powi(2)).sum::<f64>() / n).sqrt();
+        if sd.is_nan() || sd <= 0.0 {
+            continue;
+        }
+        let z = |i: usize| (fv(i) - mean) / sd;
+        let (z_train, z_test): (Vec<f64>, Vec<f64>) = (
+            train.iter().map(|&i| z(i)).collect(),
+            test.iter().map(|&i| z(i)).collect(),
+        );
         for c in 0..3 {
-            // Standardise the feature on the training rows.
-            let fv = |i: usize| feats.values[i][j];
-            let n = train.len() as f64;
-            let mean = train.iter().map(|&i| fv(i)).sum::<f64>() / n;
-            let sd = (train.iter().map(|&i| (fv(i) - mean).powi(2)).sum::<f64>() / n).sqrt();
-            if sd.is_nan() || sd <= 0.0 {
-                continue;
-            }
-            let z = |i: usize| (fv(i) - mean) / sd;
             // Quadratic fit r ~ a + b z + c z^2 on the training rows.
             let mut ata = nalgebra::Matrix3::<f64>::zeros();
             let mut atr = nalgebra::Vector3::<f64>::zeros();
-            for &i in train {
-                let zz = z(i);
+            for (&i, &zz) in train.iter().zip(&z_train) {
                 let b = nalgebra::Vector3::new(1.0, zz, zz * zz);
                 ata += b * b.transpose();
                 atr += b * ctx.rows[i].r[c];
@@ -215,8 +218,7 @@ pub fn links(ctx: &Context, feats: &Features, train: &[usize], test: &[usize]) -
                 continue;
             };
             let (mut sr, mut sz, mut szz, mut srr, mut szr) = (0.0, 0.0, 0.0, 0.0, 0.0);
-            for &i in test {
-                let zz = z(i);
+            for (&i, &zz) in test.iter().zip(&z_test) {
                 let r = ctx.rows[i].r[c];
                 let pred = coef[0] + coef[1] * zz + coef[2] * zz * zz;
                 ss_before += r * r;

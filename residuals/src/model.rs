@@ -776,6 +776,22 @@ impl ExtendedModel {
         }
         q
     }
+
+    /// [`ExtendedModel::effective_steps`] of the rows `ks` of a series (ascending), the same
+    /// values. Without a play (no stage [`Extension::plays`]) only those rows are computed: a
+    /// profile over a latency evaluates some eighty delays on a fifth of the rows.
+    pub fn effective_steps_at(&self, s: &Series, effects: &Effects, ks: &[usize]) -> Vec<[f64; 3]> {
+        if self.chain.iter().any(|x| x.plays(effects)) {
+            let q = self.effective_steps(s, effects);
+            return ks.iter().map(|&k| q[k]).collect();
+        }
+        let delay: f64 = self.chain.iter().map(|x| x.delay_s(effects)).sum();
+        let mut q = delayed_steps_at(s, s.delay_s + delay, ks.iter().copied());
+        for x in self.chain {
+            x.transmission(effects, &mut q);
+        }
+        q
+    }
 }
 
 /// Where the kinematics of a series' rows from row `k` on start: the last measured pose at or
@@ -791,11 +807,21 @@ fn start_guess(s: &Series, k: usize) -> Pose {
 
 /// The commanded motor positions of every row shifted back by `delay` (interpolated; one pass).
 pub fn delayed_steps(s: &Series, delay: f64) -> Vec<[f64; 3]> {
+    delayed_steps_at(s, delay, 0..s.samples.len())
+}
+
+/// [`delayed_steps`] of the rows `ks` (ascending): one pass that moves from each row's bracket
+/// to the next one's.
+fn delayed_steps_at(
+    s: &Series,
+    delay: f64,
+    ks: impl ExactSizeIterator<Item = usize>,
+) -> Vec<[f64; 3]> {
     let x = &s.samples;
-    let mut out = Vec::with_capacity(x.len());
+    let mut out = Vec::with_capacity(ks.len());
     let mut j = 0usize;
-    for r in x {
-        let t = r.t_s - delay;
+    for k in ks {
+        let t = x[k].t_s - delay;
         while j + 1 < x.len() && x[j + 1].t_s <= t {
             j += 1;
         }
@@ -837,6 +863,35 @@ mod tests {
             d[5]
         );
         assert_eq!(delayed_steps(&s, -1.0)[3], [90.0, 0.0, -9.0]);
+    }
+
+    /// Some rows' motor outputs are the whole series' at those rows, with a latency and a
+    /// periodic error (computed at those rows alone) and with a play besides (the whole path).
+    #[test]
+    fn some_rows_motor_outputs_are_the_whole_series_at_them() {
+        let cfg = RobotConfig::nominal();
+        let s = swinging(&cfg, 400, 60.0, 1.3, 0.7);
+        let m = ExtendedModel::new(&cfg, crate::effects::chain()).unwrap();
+        let mut e = cfg.effects.clone();
+        e.latency = Some(pcr_robot::effects::Latency { latency_s: 0.037 });
+        e.periodic = vec![pcr_robot::effects::Periodic {
+            motor: 2,
+            period_steps: 16.0,
+            amplitude_steps: 0.8,
+            phase_deg: 30.0,
+        }];
+        let ks: Vec<usize> = (0..400)
+            .filter(|k| k % 7 == 3 || *k < 2 || *k == 399)
+            .collect();
+        for backlash in [None, Some([3.0, 4.0, 3.0])] {
+            e.backlash = backlash.map(|steps| pcr_robot::effects::Backlash { steps });
+            let whole = m.effective_steps(&s, &e);
+            let some = m.effective_steps_at(&s, &e, &ks);
+            assert_eq!(some.len(), ks.len());
+            for (q, &k) in some.iter().zip(&ks) {
+                assert_eq!(*q, whole[k], "row {k}, backlash {backlash:?}");
+            }
+        }
     }
 
     /// A series of `n` rows 20 ms apart whose motors swing about home by `amplitude` steps

@@ -57,6 +57,10 @@ impl Extension for Backlash {
             apply(q, b);
         }
     }
+
+    fn plays(&self, effects: &Effects) -> bool {
+        effects.backlash.is_some()
+    }
 }
 
 impl Effect for Backlash {

@@ -62,19 +62,30 @@ impl Effect for Creep {
     fn fit(&self, ctx: &Context, train: &[usize]) -> Option<Fitted> {
         let mmps: [f64; 3] =
             std::array::from_fn(|i| ctx.model.config.legs[i].actuation.mm_per_step());
-        // E_i(T): the first-order lag of dl_i, per row (in steps: divided by mm/step).
-        let lag = |t_c: f64| -> Vec<Vec<[f64; 3]>> {
+        // E_i(T): the first-order lag of dl_i, per row (in steps: divided by mm/step), of the
+        // series `needed` (the others empty). The rows' spacing repeats: its factor is computed
+        // when it changes.
+        let lag = |t_c: f64, needed: &[bool]| -> Vec<Vec<[f64; 3]>> {
             ctx.series
                 .iter()
                 .zip(&ctx.preds)
-                .map(|(s, p)| {
+                .zip(needed)
+                .map(|((s, p), &needed)| {
+                    if !needed {
+                        return Vec::new();
+                    }
                     let mut e = [0.0f64; 3];
                     let mut prev = s.samples.first().map_or(0.0, |x| x.t_s);
+                    let (mut last_dt, mut last_a) = (f64::NAN, 0.0);
                     s.samples
                         .iter()
                         .zip(p)
                         .map(|(x, pr)| {
-                            let a = 1.0 - (-(x.t_s - prev).max(0.0) / t_c).exp();
+                            let dt = (x.t_s - prev).max(0.0);
+                            if dt != last_dt {
+                                (last_dt, last_a) = (dt, 1.0 - (-dt / t_c).exp());
+                            }
+                            let a = last_a;
                             prev = x.t_s;
                             std::array::from_fn(|i| {
                                 e[i] += (pr.dl_eff[i] - e[i]) * a;
@@ -96,8 +107,12 @@ impl Effect for Creep {
             }
         };
         let rows = search_rows(train);
+        let mut searched = vec![false; ctx.series.len()];
+        for &i in &rows {
+            searched[ctx.rows[i].s] = true;
+        }
         let sse_for = |t_c: f64| -> f64 {
-            let l = lag(t_c);
+            let l = lag(t_c, &searched);
             linear::solve(ctx, &rows, 3, &|i, c| effect_for(&l, i, c))
                 .map_or(f64::INFINITY, |f| f.sse)
         };
@@ -108,7 +123,7 @@ impl Effect for Creep {
         let (lt, sse, curv) = minimise_1d(&mut |x| sse_for(x.exp()), &grid);
         let t_c = lt.exp();
         let std_t = profile_std(sse, 3 * rows.len(), curv).map(|s| s * t_c);
-        let l = lag(t_c);
+        let l = lag(t_c, &vec![true; ctx.series.len()]);
         let (fit, delta, alone) =
             fit_joint(ctx, &nui, train, 3, &|i, c| effect_for(&l, i, c), None)?;
         let gain = [fit.x[0], fit.x[1], fit.x[2]];

@@ -26,16 +26,48 @@ pub(crate) fn motor_change(
 
 /// The change of the predicted pose of the rows `rows` (every measured row when `None`) when the
 /// motor side of the model (the stages timing, transmission and play of
-/// [`crate::extension::Extension`]) runs with `effects` instead of the model's.
+/// [`crate::extension::Extension`]) runs with `effects` instead of the model's. With `rows`,
+/// only their series, and without a play only their rows
+/// ([`crate::model::ExtendedModel::effective_steps_at`]).
 pub(crate) fn motor_side_delta(
     ctx: &Context,
     effects: &Effects,
     rows: Option<&[usize]>,
 ) -> Vec<[f64; 3]> {
-    let q_new: Vec<Vec<[f64; 3]>> = ctx
+    let Some(rows) = rows else {
+        let q_new: Vec<Vec<[f64; 3]>> = ctx
+            .series
+            .iter()
+            .map(|s| ctx.model.effective_steps(s, effects))
+            .collect();
+        return motor_change(ctx, &q_new, None);
+    };
+    // Per series, the rows' indices in it (ascending) and their motor outputs.
+    let mut ks: Vec<Vec<usize>> = vec![Vec::new(); ctx.series.len()];
+    for &i in rows {
+        ks[ctx.rows[i].s].push(ctx.rows[i].k);
+    }
+    let q: Vec<Vec<[f64; 3]>> = ctx
         .series
         .iter()
-        .map(|s| ctx.model.effective_steps(s, effects))
+        .zip(&mut ks)
+        .map(|(s, k)| {
+            k.sort_unstable();
+            k.dedup();
+            if k.is_empty() {
+                Vec::new()
+            } else {
+                ctx.model.effective_steps_at(s, effects, k)
+            }
+        })
         .collect();
-    motor_change(ctx, &q_new, rows)
+    rows.iter()
+        .map(|&i| {
+            let row = &ctx.rows[i];
+            let now = ctx.pred(row).q_eff;
+            let at = ks[row.s].binary_search(&row.k).unwrap_or(0);
+            let o = q[row.s][at];
+            motor_delta(ctx, i, [o[0] - now[0], o[1] - now[1], o[2] - now[2]])
+        })
+        .collect()
 }

@@ -107,26 +107,44 @@ impl Periodic {
                     (a.0.min(q), a.1.max(q))
                 });
             let longest = (hi - lo) / MIN_CYCLES;
-            let rows: Vec<([f64; 3], [f64; 3], f64)> = search_rows(train)
+            // Per motor position (to a millionth of a step): the sums over its rows of the
+            // column dotted with the residual and with itself. Rows at rest and rows that
+            // return to a position share one: the scan below evaluates sin and cos once per
+            // position and period, not once per row.
+            let mut at: Vec<(f64, f64, f64)> = search_rows(train)
                 .iter()
                 .map(|&i| {
                     let mut dq = [0.0; 3];
                     dq[m] = 1.0;
                     let c = motor_delta(ctx, i, dq);
-                    let row = &ctx.rows[i];
-                    (c, row.r, ctx.pred(row).q_eff[m])
+                    let r = ctx.rows[i].r;
+                    let q = ctx.pred(&ctx.rows[i]).q_eff[m];
+                    (
+                        q,
+                        c[0] * r[0] + c[1] * r[1] + c[2] * r[2],
+                        c[0] * c[0] + c[1] * c[1] + c[2] * c[2],
+                    )
                 })
                 .collect();
+            at.sort_by(|a, b| a.0.total_cmp(&b.0));
+            let mut rows: Vec<(f64, f64, f64)> = Vec::with_capacity(at.len());
+            for (q, cr, c2) in at {
+                match rows.last_mut() {
+                    Some(last) if (q - last.0).abs() <= 1e-6 => {
+                        last.1 += cr;
+                        last.2 += c2;
+                    }
+                    _ => rows.push((q, cr, c2)),
+                }
+            }
             for &per in periods
                 .iter()
                 .filter(|p| only.map_or(**p <= longest, |(_, op)| (**p - op).abs() < 1e-9))
             {
                 let w = std::f64::consts::TAU / per;
                 let (mut ss, mut sc, mut cc, mut rs, mut rc) = (0.0, 0.0, 0.0, 0.0, 0.0);
-                for (c, r, q) in &rows {
+                for &(q, cr, c2) in &rows {
                     let (sn, cs) = (w * q).sin_cos();
-                    let cr = c[0] * r[0] + c[1] * r[1] + c[2] * r[2];
-                    let c2 = c[0] * c[0] + c[1] * c[1] + c[2] * c[2];
                     ss += c2 * sn * sn;
                     sc += c2 * sn * cs;
                     cc += c2 * cs * cs;
