@@ -249,9 +249,13 @@ impl ExtendedModel {
             })
             .collect();
         let mut preds = parts.concat();
-        if let Some(f) = &self.friction {
+        // The friction's history runs from the first row to the last one wanted (the rows after
+        // it are not predicted; a series none of whose rows is wanted, e.g. the holdout in a
+        // training context, takes no pass).
+        let last_wanted = (0..n).rev().find(|&k| want(k));
+        if let (Some(f), Some(last)) = (&self.friction, last_wanted) {
             let started = std::time::Instant::now();
-            let kappa: Vec<[f64; 3]> = preds.iter().map(|p| p.kappa).collect();
+            let kappa: Vec<[f64; 3]> = preds[..=last].iter().map(|p| p.kappa).collect();
             let rigid = self.rigid_path(s, &kappa);
             for (k, d) in self
                 .friction_path(&rigid, &kappa, f)

@@ -179,7 +179,11 @@ impl FrozenFriction {
             .par_iter()
             .zip(rows)
             .map(|(s, rows)| {
-                let all: Vec<usize> = (0..s.samples.len()).collect();
+                // The history up to the last refined row (none: no pass).
+                let Some(&last) = rows.iter().max() else {
+                    return Vec::new();
+                };
+                let all: Vec<usize> = (0..=last).collect();
                 let kappa = model.curvatures(s, &all);
                 let rigid = model.rigid_path(s, &kappa);
                 let path = model.friction_path_tangent(&rigid, &kappa, &f);
