@@ -14,9 +14,7 @@ pub(crate) fn motor_change(
 ) -> Vec<[f64; 3]> {
     let one = |i: usize| {
         let row = &ctx.rows[i];
-        let q = ctx.pred(row).q_eff;
-        let o = q_new[row.s][row.k];
-        motor_delta(ctx, i, [o[0] - q[0], o[1] - q[1], o[2] - q[2]])
+        towards(ctx, i, q_new[row.s][row.k])
     };
     match rows {
         Some(r) => r.iter().map(|&i| one(i)).collect(),
@@ -64,10 +62,14 @@ pub(crate) fn motor_side_delta(
     rows.iter()
         .map(|&i| {
             let row = &ctx.rows[i];
-            let now = ctx.pred(row).q_eff;
             let at = ks[row.s].binary_search(&row.k).unwrap_or(0);
-            let o = q[row.s][at];
-            motor_delta(ctx, i, [o[0] - now[0], o[1] - now[1], o[2] - now[2]])
+            towards(ctx, i, q[row.s][at])
         })
         .collect()
+}
+
+/// The change of row `i`'s predicted pose when its motor outputs become `o` (steps).
+fn towards(ctx: &Context, i: usize, o: [f64; 3]) -> [f64; 3] {
+    let now = ctx.pred(&ctx.rows[i]).q_eff;
+    motor_delta(ctx, i, [o[0] - now[0], o[1] - now[1], o[2] - now[2]])
 }
