@@ -898,6 +898,53 @@ mod tests {
         }
     }
 
+    /// Under friction, a prediction of some rows runs the friction's history only to the last
+    /// of them: those rows are the whole prediction's, to the bit, and the rows after it are
+    /// not predicted.
+    #[test]
+    fn some_rows_under_friction_are_the_whole_prediction_at_them() {
+        let mut cfg = RobotConfig::nominal();
+        cfg.effects.friction = Some(pcr_robot::effects::Friction {
+            joint_torque_n_mm: 6.0,
+            support_force_n: 0.12,
+            joint_presliding_rad: pcr_robot::effects::Friction::default_joint_presliding(),
+            support_presliding_mm: pcr_robot::effects::Friction::default_support_presliding(),
+            ei_n_mm2: pcr_robot::effects::Friction::default_ei(),
+        });
+        let s = swinging(&cfg, 300, 80.0, 1.1, 0.9);
+        let m = ExtendedModel::new(&cfg, crate::effects::chain()).unwrap();
+        assert!(m.friction.is_some());
+        let whole = m.predict(&s);
+        let want = |k: usize| k % 4 == 1 && k < 200;
+        let some = m.predict_where(&s, &want);
+        for k in 0..300 {
+            if want(k) {
+                assert_eq!(whole[k].pose, some[k].pose, "row {k}");
+                assert!(some[k].pose.is_some(), "row {k}");
+            } else if k > 197 {
+                assert!(some[k].pose.is_none(), "row {k} is not wanted");
+            }
+        }
+        // A row wanted alone still has the history of the path that led to it.
+        assert_eq!(
+            m.predict_where(&s, &|j| j == 197)[197].pose,
+            whole[197].pose
+        );
+        // And the friction acts on these rows.
+        let mut none = cfg.clone();
+        none.effects.friction = None;
+        let rigid = ExtendedModel::new(&none, crate::effects::chain())
+            .unwrap()
+            .predict(&s);
+        let moved = (0..300)
+            .filter(|&k| match (whole[k].pose, rigid[k].pose) {
+                (Some(a), Some(b)) => (a[0] - b[0]).hypot(a[1] - b[1]) > 1e-3,
+                _ => false,
+            })
+            .count();
+        assert!(moved > 100, "{moved} rows deflected by the friction");
+    }
+
     /// A series of `n` rows 20 ms apart whose motors swing about home by `amplitude` steps
     /// (motor i at `rate` t + `phase` i rad), rounded to whole steps, each row with a measured
     /// pose.
