@@ -364,9 +364,7 @@ fn per_block_sse(
     let mut cols: Vec<[f64; 3]> = Vec::with_capacity(rows.len() * m);
     for &i in rows {
         let row = &ctx.rows[i];
-        let now = ctx.pred(row).q_eff;
-        let o = q[row.k];
-        let d = motor_delta(ctx, i, [o[0] - now[0], o[1] - now[1], o[2] - now[2]]);
+        let d = crate::effects::motor_change::towards(ctx, i, q[row.k]);
         res.push([row.r[0] - d[0], row.r[1] - d[1], row.r[2] - d[2]]);
         for mo in 0..3 {
             let mut dq = [0.0; 3];
@@ -410,7 +408,8 @@ fn motion_direction(q: &[[f64; 3]]) -> Vec<[f64; 3]> {
 }
 
 /// The coefficients that best fit `res` by the columns `cols` (`m` a row, one row after the
-/// other; least squares on equilibrated columns, with a tiny ridge so that an empty column, e.g. a motor that never moved, gets 0).
+/// other; least squares on equilibrated columns, with a tiny ridge so that an empty column,
+/// e.g. a motor that never moved, gets 0).
 fn least_squares(res: &[[f64; 3]], cols: &[[f64; 3]], m: usize) -> Vec<f64> {
     let mut a = nalgebra::DMatrix::<f64>::zeros(m, m);
     let mut b = nalgebra::DVector::<f64>::zeros(m);

@@ -441,14 +441,17 @@ impl<'a> Search<'a> {
             .collect();
         // The reference for the effects: the recalibration fit; for the recalibration itself,
         // the model as it is.
-        let t0 = std::time::Instant::now();
-        let mut recal = effects::reference().and_then(|g| g.fit(ctx, &train));
-        tracing::debug!(
-            round,
-            name = "reference",
-            seconds = t0.elapsed().as_secs_f64(),
-            "candidate fitted"
-        );
+        // Each candidate's fit, timed (`PCR_LOG=pcr_residuals::attribution=debug`).
+        let timed = |name: &str, fit: &dyn Fn() -> Option<Fitted>| {
+            let t0 = std::time::Instant::now();
+            let f = fit();
+            let seconds = t0.elapsed().as_secs_f64();
+            tracing::debug!(round, name, seconds, "candidate fitted");
+            f
+        };
+        let mut recal = timed("reference", &|| {
+            effects::reference().and_then(|g| g.fit(ctx, &train))
+        });
         // A recalibration that would leave the drawing only mimics another cause: it is then no
         // reference (the effects are measured against the model as it is).
         let recal_physical = recal.as_ref().is_some_and(|g| {
@@ -477,16 +480,11 @@ impl<'a> Search<'a> {
         let fitted_all: Vec<Option<Fitted>> = names
             .par_iter()
             .map(|name| {
-                let t0 = std::time::Instant::now();
-                let f = effects::named(name)
-                    .filter(|e| e.role() != Role::Reference)
-                    .and_then(|e| e.fit(ctx, &train));
-                tracing::debug!(
-                    round,
-                    name = name.as_str(),
-                    seconds = t0.elapsed().as_secs_f64(),
-                    "candidate fitted"
-                );
+                let f = timed(name, &|| {
+                    effects::named(name)
+                        .filter(|e| e.role() != Role::Reference)
+                        .and_then(|e| e.fit(ctx, &train))
+                });
                 set.opts.progress.step();
                 f
             })

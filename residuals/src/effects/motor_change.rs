@@ -69,7 +69,7 @@ pub(crate) fn motor_side_delta(
 }
 
 /// The change of row `i`'s predicted pose when its motor outputs become `o` (steps).
-fn towards(ctx: &Context, i: usize, o: [f64; 3]) -> [f64; 3] {
+pub(crate) fn towards(ctx: &Context, i: usize, o: [f64; 3]) -> [f64; 3] {
     let now = ctx.pred(&ctx.rows[i]).q_eff;
     motor_delta(ctx, i, [o[0] - now[0], o[1] - now[1], o[2] - now[2]])
 }
