@@ -200,42 +200,68 @@ impl Segment {
 /// (independent chains the processor overlaps); the tests hold them bit for bit to one
 /// segment's integration.
 fn deflect3(seg: &[Segment; 3], ei: f64, f: [Vec2; 3], u0: [f64; 3]) -> [[f64; 3]; 3] {
-    let fx: [f64; 3] = std::array::from_fn(|i| f[i][0] / ei);
-    let fy: [f64; 3] = std::array::from_fn(|i| f[i][1] / ei);
-    let rhs = |i: usize, a: [f64; 2], e: [f64; 2], u: f64| -> [f64; 4] {
+    let fx = [f[0][0] / ei, f[1][0] / ei, f[2][0] / ei];
+    let fy = [f[0][1] / ei, f[1][1] / ei, f[2][1] / ei];
+    #[inline(always)]
+    fn rhs(fx: f64, fy: f64, a: [f64; 2], e: [f64; 2], u: f64) -> [f64; 4] {
         let c = a[0] * e[0] - a[1] * e[1];
         let s = a[1] * e[0] + a[0] * e[1];
-        [u, s * fx[i] - c * fy[i], c - a[0], s - a[1]]
-    };
-    let turn = |e: [f64; 2], x: f64| -> [f64; 2] {
+        [u, s * fx - c * fy, c - a[0], s - a[1]]
+    }
+    #[inline(always)]
+    fn turn(e: [f64; 2], x: f64) -> [f64; 2] {
         let (s, c) = sin_cos_small(x);
         [e[0] * c - e[1] * s, e[1] * c + e[0] * s]
-    };
-    let h: [f64; 3] = std::array::from_fn(|i| seg[i].h);
+    }
+    let h = [seg[0].h, seg[1].h, seg[2].h];
     let mut d = [0.0f64; 3];
     let mut u = u0;
     let mut x = [0.0f64; 3];
     let mut y = [0.0f64; 3];
     let mut e = [[1.0, 0.0]; 3];
+    // Plain loops over the three lanes: built through `std::array::from_fn`, the stages'
+    // arrays were not inlined, and `core::array::try_from_fn` took more cpu than the arithmetic
+    // (7 % of an analysis under joint springs against 4 %).
     for j in 0..STEPS {
-        let a0: [[f64; 2]; 3] = std::array::from_fn(|i| seg[i].arc[2 * j]);
-        let am: [[f64; 2]; 3] = std::array::from_fn(|i| seg[i].arc[2 * j + 1]);
-        let a1: [[f64; 2]; 3] = std::array::from_fn(|i| seg[i].arc[2 * j + 2]);
-        let k1: [[f64; 4]; 3] = std::array::from_fn(|i| rhs(i, a0[i], e[i], u[i]));
-        // The next RK4 stage at `a`, a fraction `f` of the step along the stage before.
-        let stage = |k: &[[f64; 4]; 3], a: &[[f64; 2]; 3], f: f64| -> [[f64; 4]; 3] {
-            std::array::from_fn(|i| {
-                rhs(
-                    i,
-                    a[i],
-                    turn(e[i], f * h[i] * k[i][0]),
-                    u[i] + f * h[i] * k[i][1],
-                )
-            })
-        };
-        let k2 = stage(&k1, &am, 0.5);
-        let k3 = stage(&k2, &am, 0.5);
-        let k4 = stage(&k3, &a1, 1.0);
+        let mut k1 = [[0.0f64; 4]; 3];
+        let mut k2 = [[0.0f64; 4]; 3];
+        let mut k3 = [[0.0f64; 4]; 3];
+        let mut k4 = [[0.0f64; 4]; 3];
+        for i in 0..3 {
+            k1[i] = rhs(fx[i], fy[i], seg[i].arc[2 * j], e[i], u[i]);
+        }
+        // The next RK4 stages: half the step along the one before at the midpoint node (twice),
+        // then the whole step at the step's end.
+        for i in 0..3 {
+            let k = k1[i];
+            k2[i] = rhs(
+                fx[i],
+                fy[i],
+                seg[i].arc[2 * j + 1],
+                turn(e[i], 0.5 * h[i] * k[0]),
+                u[i] + 0.5 * h[i] * k[1],
+            );
+        }
+        for i in 0..3 {
+            let k = k2[i];
+            k3[i] = rhs(
+                fx[i],
+                fy[i],
+                seg[i].arc[2 * j + 1],
+                turn(e[i], 0.5 * h[i] * k[0]),
+                u[i] + 0.5 * h[i] * k[1],
+            );
+        }
+        for i in 0..3 {
+            let k = k3[i];
+            k4[i] = rhs(
+                fx[i],
+                fy[i],
+                seg[i].arc[2 * j + 2],
+                turn(e[i], h[i] * k[0]),
+                u[i] + h[i] * k[1],
+            );
+        }
         for i in 0..3 {
             let w = h[i] / 6.0;
             let (k1, k2, k3, k4) = (k1[i], k2[i], k3[i], k4[i]);
@@ -247,7 +273,7 @@ fn deflect3(seg: &[Segment; 3], ei: f64, f: [Vec2; 3], u0: [f64; 3]) -> [[f64; 3
             y[i] += w * (k1[3] + 2.0 * (k2[3] + k3[3]) + k4[3]);
         }
     }
-    std::array::from_fn(|i| [x[i], y[i], d[i]])
+    [[x[0], y[0], d[0]], [x[1], y[1], d[1]], [x[2], y[2], d[2]]]
 }
 
 /// [`deflect3`] with its derivatives `jac[i][o][k] = d out_o / d (f_x, f_y, u0)_k` of segment
@@ -261,32 +287,40 @@ fn deflect_jac3(
     f: [Vec2; 3],
     u0: [f64; 3],
 ) -> ([[f64; 3]; 3], [[[f64; 3]; 3]; 3]) {
-    let fx: [f64; 3] = std::array::from_fn(|i| f[i][0] / ei);
-    let fy: [f64; 3] = std::array::from_fn(|i| f[i][1] / ei);
+    let fx = [f[0][0] / ei, f[1][0] / ei, f[2][0] / ei];
+    let fy = [f[0][1] / ei, f[1][1] / ei, f[2][1] / ei];
     let g = 1.0 / ei;
     // One RK4 stage: the derivatives and the tangent's (cos, sin).
     type Stage = ([f64; 4], f64, f64);
-    let rhs = |i: usize, a: [f64; 2], e: [f64; 2], u: f64| -> Stage {
+    #[inline(always)]
+    fn rhs(fx: f64, fy: f64, a: [f64; 2], e: [f64; 2], u: f64) -> Stage {
         let c = a[0] * e[0] - a[1] * e[1];
         let s = a[1] * e[0] + a[0] * e[1];
-        ([u, s * fx[i] - c * fy[i], c - a[0], s - a[1]], c, s)
-    };
-    let var = |i: usize, t: &[[f64; 2]; 3], c: f64, s: f64| -> [[f64; 4]; 3] {
-        let m = c * fx[i] + s * fy[i];
+        ([u, s * fx - c * fy, c - a[0], s - a[1]], c, s)
+    }
+    #[inline(always)]
+    fn var(fx: f64, fy: f64, g: f64, t: &[[f64; 2]; 3], c: f64, s: f64) -> [[f64; 4]; 3] {
+        let m = c * fx + s * fy;
         [
             [t[0][1], m * t[0][0] + s * g, -s * t[0][0], c * t[0][0]],
             [t[1][1], m * t[1][0] - c * g, -s * t[1][0], c * t[1][0]],
             [t[2][1], m * t[2][0], -s * t[2][0], c * t[2][0]],
         ]
-    };
-    let turn = |e: [f64; 2], x: f64| -> [f64; 2] {
+    }
+    #[inline(always)]
+    fn turn(e: [f64; 2], x: f64) -> [f64; 2] {
         let (s, c) = sin_cos_small(x);
         [e[0] * c - e[1] * s, e[1] * c + e[0] * s]
-    };
-    let adv = |t: &[[f64; 2]; 3], k: &[[f64; 4]; 3], x: f64| -> [[f64; 2]; 3] {
-        std::array::from_fn(|i| [t[i][0] + x * k[i][0], t[i][1] + x * k[i][1]])
-    };
-    let h: [f64; 3] = std::array::from_fn(|i| seg[i].h);
+    }
+    #[inline(always)]
+    fn adv(t: &[[f64; 2]; 3], k: &[[f64; 4]; 3], x: f64) -> [[f64; 2]; 3] {
+        [
+            [t[0][0] + x * k[0][0], t[0][1] + x * k[0][1]],
+            [t[1][0] + x * k[1][0], t[1][1] + x * k[1][1]],
+            [t[2][0] + x * k[2][0], t[2][1] + x * k[2][1]],
+        ]
+    }
+    let h = [seg[0].h, seg[1].h, seg[2].h];
     let mut d = [0.0f64; 3];
     let mut u = u0;
     let mut x = [0.0f64; 3];
@@ -297,28 +331,70 @@ fn deflect_jac3(
         t[2][1] = 1.0;
     }
     let mut tp = [[[0.0f64; 2]; 3]; 3];
+    // Plain loops over the three lanes, as in [`deflect3`].
     for j in 0..STEPS {
-        let a0: [[f64; 2]; 3] = std::array::from_fn(|i| seg[i].arc[2 * j]);
-        let am: [[f64; 2]; 3] = std::array::from_fn(|i| seg[i].arc[2 * j + 1]);
-        let a1: [[f64; 2]; 3] = std::array::from_fn(|i| seg[i].arc[2 * j + 2]);
-        let r1: [_; 3] = std::array::from_fn(|i| rhs(i, a0[i], e[i], u[i]));
-        let v1: [_; 3] = std::array::from_fn(|i| var(i, &ts[i], r1[i].1, r1[i].2));
-        // The next RK4 stage at `a`, a fraction `f` of the step along the stage before.
-        let stage = |prev: &[Stage; 3], a: &[[f64; 2]; 3], f: f64| -> [Stage; 3] {
-            std::array::from_fn(|i| {
-                let k = prev[i].0;
-                rhs(i, a[i], turn(e[i], f * h[i] * k[0]), u[i] + f * h[i] * k[1])
-            })
-        };
-        let r2 = stage(&r1, &am, 0.5);
-        let v2: [_; 3] =
-            std::array::from_fn(|i| var(i, &adv(&ts[i], &v1[i], 0.5 * h[i]), r2[i].1, r2[i].2));
-        let r3 = stage(&r2, &am, 0.5);
-        let v3: [_; 3] =
-            std::array::from_fn(|i| var(i, &adv(&ts[i], &v2[i], 0.5 * h[i]), r3[i].1, r3[i].2));
-        let r4 = stage(&r3, &a1, 1.0);
-        let v4: [_; 3] =
-            std::array::from_fn(|i| var(i, &adv(&ts[i], &v3[i], h[i]), r4[i].1, r4[i].2));
+        let zero: Stage = ([0.0; 4], 0.0, 0.0);
+        let (mut r1, mut r2, mut r3, mut r4) = ([zero; 3], [zero; 3], [zero; 3], [zero; 3]);
+        let mut v1 = [[[0.0f64; 4]; 3]; 3];
+        let mut v2 = v1;
+        let mut v3 = v1;
+        let mut v4 = v1;
+        for i in 0..3 {
+            r1[i] = rhs(fx[i], fy[i], seg[i].arc[2 * j], e[i], u[i]);
+            v1[i] = var(fx[i], fy[i], g, &ts[i], r1[i].1, r1[i].2);
+        }
+        // The next RK4 stage at arc node `a`, a fraction of the step along the stage before.
+        for i in 0..3 {
+            let k = r1[i].0;
+            let a = seg[i].arc[2 * j + 1];
+            r2[i] = rhs(
+                fx[i],
+                fy[i],
+                a,
+                turn(e[i], 0.5 * h[i] * k[0]),
+                u[i] + 0.5 * h[i] * k[1],
+            );
+            v2[i] = var(
+                fx[i],
+                fy[i],
+                g,
+                &adv(&ts[i], &v1[i], 0.5 * h[i]),
+                r2[i].1,
+                r2[i].2,
+            );
+        }
+        for i in 0..3 {
+            let k = r2[i].0;
+            let a = seg[i].arc[2 * j + 1];
+            r3[i] = rhs(
+                fx[i],
+                fy[i],
+                a,
+                turn(e[i], 0.5 * h[i] * k[0]),
+                u[i] + 0.5 * h[i] * k[1],
+            );
+            v3[i] = var(
+                fx[i],
+                fy[i],
+                g,
+                &adv(&ts[i], &v2[i], 0.5 * h[i]),
+                r3[i].1,
+                r3[i].2,
+            );
+        }
+        for i in 0..3 {
+            let k = r3[i].0;
+            let a = seg[i].arc[2 * j + 2];
+            r4[i] = rhs(fx[i], fy[i], a, turn(e[i], h[i] * k[0]), u[i] + h[i] * k[1]);
+            v4[i] = var(
+                fx[i],
+                fy[i],
+                g,
+                &adv(&ts[i], &v3[i], h[i]),
+                r4[i].1,
+                r4[i].2,
+            );
+        }
         for i in 0..3 {
             let w = h[i] / 6.0;
             let (k1, k2, k3, k4) = (r1[i].0, r2[i].0, r3[i].0, r4[i].0);
@@ -338,7 +414,7 @@ fn deflect_jac3(
             }
         }
     }
-    let out = std::array::from_fn(|i| [x[i], y[i], d[i]]);
+    let out = [[x[0], y[0], d[0]], [x[1], y[1], d[1]], [x[2], y[2], d[2]]];
     let jac = std::array::from_fn(|i| {
         let (ts, tp) = (&ts[i], &tp[i]);
         [
