@@ -202,66 +202,20 @@ impl Segment {
 fn deflect3(seg: &[Segment; 3], ei: f64, f: [Vec2; 3], u0: [f64; 3]) -> [[f64; 3]; 3] {
     let fx = [f[0][0] / ei, f[1][0] / ei, f[2][0] / ei];
     let fy = [f[0][1] / ei, f[1][1] / ei, f[2][1] / ei];
-    #[inline(always)]
-    fn rhs(fx: f64, fy: f64, a: [f64; 2], e: [f64; 2], u: f64) -> [f64; 4] {
-        let c = a[0] * e[0] - a[1] * e[1];
-        let s = a[1] * e[0] + a[0] * e[1];
-        [u, s * fx - c * fy, c - a[0], s - a[1]]
-    }
-    #[inline(always)]
-    fn turn(e: [f64; 2], x: f64) -> [f64; 2] {
-        let (s, c) = sin_cos_small(x);
-        [e[0] * c - e[1] * s, e[1] * c + e[0] * s]
-    }
     let h = [seg[0].h, seg[1].h, seg[2].h];
     let mut d = [0.0f64; 3];
     let mut u = u0;
     let mut x = [0.0f64; 3];
     let mut y = [0.0f64; 3];
     let mut e = [[1.0, 0.0]; 3];
-    // Plain loops over the three lanes: built through `std::array::from_fn`, the stages'
-    // arrays were not inlined, and `core::array::try_from_fn` took more cpu than the arithmetic
-    // (7 % of an analysis under joint springs against 4 %).
+    // The stages in plain loops over the lanes ([`rk_stage`]): built through
+    // `std::array::from_fn` closures they were not inlined, and `core::array::try_from_fn`
+    // took more cpu than the arithmetic (7 % of an analysis under joint springs against 4 %).
     for j in 0..STEPS {
-        let mut k1 = [[0.0f64; 4]; 3];
-        let mut k2 = [[0.0f64; 4]; 3];
-        let mut k3 = [[0.0f64; 4]; 3];
-        let mut k4 = [[0.0f64; 4]; 3];
-        for i in 0..3 {
-            k1[i] = rhs(fx[i], fy[i], seg[i].arc[2 * j], e[i], u[i]);
-        }
-        // The next RK4 stages: half the step along the one before at the midpoint node (twice),
-        // then the whole step at the step's end.
-        for i in 0..3 {
-            let k = k1[i];
-            k2[i] = rhs(
-                fx[i],
-                fy[i],
-                seg[i].arc[2 * j + 1],
-                turn(e[i], 0.5 * h[i] * k[0]),
-                u[i] + 0.5 * h[i] * k[1],
-            );
-        }
-        for i in 0..3 {
-            let k = k2[i];
-            k3[i] = rhs(
-                fx[i],
-                fy[i],
-                seg[i].arc[2 * j + 1],
-                turn(e[i], 0.5 * h[i] * k[0]),
-                u[i] + 0.5 * h[i] * k[1],
-            );
-        }
-        for i in 0..3 {
-            let k = k3[i];
-            k4[i] = rhs(
-                fx[i],
-                fy[i],
-                seg[i].arc[2 * j + 2],
-                turn(e[i], h[i] * k[0]),
-                u[i] + h[i] * k[1],
-            );
-        }
+        let k1 = rk_stage(seg, fx, fy, h, &e, &u, None, 2 * j, 0.0);
+        let k2 = rk_stage(seg, fx, fy, h, &e, &u, Some(&k1), 2 * j + 1, 0.5);
+        let k3 = rk_stage(seg, fx, fy, h, &e, &u, Some(&k2), 2 * j + 1, 0.5);
+        let k4 = rk_stage(seg, fx, fy, h, &e, &u, Some(&k3), 2 * j + 2, 1.0);
         for i in 0..3 {
             let w = h[i] / 6.0;
             let (k1, k2, k3, k4) = (k1[i], k2[i], k3[i], k4[i]);
@@ -274,6 +228,54 @@ fn deflect3(seg: &[Segment; 3], ei: f64, f: [Vec2; 3], u0: [f64; 3]) -> [[f64; 3
         }
     }
     [[x[0], y[0], d[0]], [x[1], y[1], d[1]], [x[2], y[2], d[2]]]
+}
+
+/// The elastica's right-hand side at arc node `a` (its tangent's (cos, sin)) with (cos, sin)
+/// of delta `e` and delta' `u`, the tip force over EI (`fx`, `fy`): (delta', u', x', y') and
+/// the tangent's (cos, sin) there ([`deflect3`], [`deflect_jac3`]).
+#[inline(always)]
+fn rk_rhs(fx: f64, fy: f64, a: [f64; 2], e: [f64; 2], u: f64) -> ([f64; 4], f64, f64) {
+    let c = a[0] * e[0] - a[1] * e[1];
+    let s = a[1] * e[0] + a[0] * e[1];
+    ([u, s * fx - c * fy, c - a[0], s - a[1]], c, s)
+}
+
+/// The RK4 stage of [`deflect3`]'s three lanes at arc node `node` (lane i's segment
+/// `seg[i]`, tip force over EI `fx[i]`, `fy[i]`, step `h[i]`, state `e[i]`, `u[i]`), taken a
+/// fraction `frac` of the step along the stage `prev` (`None`: the first stage, at the state).
+/// A plain function, not a closure, so that it is inlined.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn rk_stage(
+    seg: &[Segment; 3],
+    fx: [f64; 3],
+    fy: [f64; 3],
+    h: [f64; 3],
+    e: &[[f64; 2]; 3],
+    u: &[f64; 3],
+    prev: Option<&[[f64; 4]; 3]>,
+    node: usize,
+    frac: f64,
+) -> [[f64; 4]; 3] {
+    let mut out = [[0.0f64; 4]; 3];
+    for i in 0..3 {
+        let (ei, ui) = match prev {
+            None => (e[i], u[i]),
+            Some(k) => (
+                turn(e[i], frac * h[i] * k[i][0]),
+                u[i] + frac * h[i] * k[i][1],
+            ),
+        };
+        out[i] = rk_rhs(fx[i], fy[i], seg[i].arc[node], ei, ui).0;
+    }
+    out
+}
+
+/// (cos, sin) `e` turned by the angle `x` ([`sin_cos_small`]).
+#[inline(always)]
+fn turn(e: [f64; 2], x: f64) -> [f64; 2] {
+    let (s, c) = sin_cos_small(x);
+    [e[0] * c - e[1] * s, e[1] * c + e[0] * s]
 }
 
 /// [`deflect3`] with its derivatives `jac[i][o][k] = d out_o / d (f_x, f_y, u0)_k` of segment
@@ -290,36 +292,6 @@ fn deflect_jac3(
     let fx = [f[0][0] / ei, f[1][0] / ei, f[2][0] / ei];
     let fy = [f[0][1] / ei, f[1][1] / ei, f[2][1] / ei];
     let g = 1.0 / ei;
-    // One RK4 stage: the derivatives and the tangent's (cos, sin).
-    type Stage = ([f64; 4], f64, f64);
-    #[inline(always)]
-    fn rhs(fx: f64, fy: f64, a: [f64; 2], e: [f64; 2], u: f64) -> Stage {
-        let c = a[0] * e[0] - a[1] * e[1];
-        let s = a[1] * e[0] + a[0] * e[1];
-        ([u, s * fx - c * fy, c - a[0], s - a[1]], c, s)
-    }
-    #[inline(always)]
-    fn var(fx: f64, fy: f64, g: f64, t: &[[f64; 2]; 3], c: f64, s: f64) -> [[f64; 4]; 3] {
-        let m = c * fx + s * fy;
-        [
-            [t[0][1], m * t[0][0] + s * g, -s * t[0][0], c * t[0][0]],
-            [t[1][1], m * t[1][0] - c * g, -s * t[1][0], c * t[1][0]],
-            [t[2][1], m * t[2][0], -s * t[2][0], c * t[2][0]],
-        ]
-    }
-    #[inline(always)]
-    fn turn(e: [f64; 2], x: f64) -> [f64; 2] {
-        let (s, c) = sin_cos_small(x);
-        [e[0] * c - e[1] * s, e[1] * c + e[0] * s]
-    }
-    #[inline(always)]
-    fn adv(t: &[[f64; 2]; 3], k: &[[f64; 4]; 3], x: f64) -> [[f64; 2]; 3] {
-        [
-            [t[0][0] + x * k[0][0], t[0][1] + x * k[0][1]],
-            [t[1][0] + x * k[1][0], t[1][1] + x * k[1][1]],
-            [t[2][0] + x * k[2][0], t[2][1] + x * k[2][1]],
-        ]
-    }
     let h = [seg[0].h, seg[1].h, seg[2].h];
     let mut d = [0.0f64; 3];
     let mut u = u0;
@@ -331,80 +303,23 @@ fn deflect_jac3(
         t[2][1] = 1.0;
     }
     let mut tp = [[[0.0f64; 2]; 3]; 3];
-    // Plain loops over the three lanes, as in [`deflect3`].
+    // The stages as in [`deflect3`] ([`rk_var_stage`]).
     for j in 0..STEPS {
-        let zero: Stage = ([0.0; 4], 0.0, 0.0);
-        let (mut r1, mut r2, mut r3, mut r4) = ([zero; 3], [zero; 3], [zero; 3], [zero; 3]);
-        let mut v1 = [[[0.0f64; 4]; 3]; 3];
-        let mut v2 = v1;
-        let mut v3 = v1;
-        let mut v4 = v1;
-        for i in 0..3 {
-            r1[i] = rhs(fx[i], fy[i], seg[i].arc[2 * j], e[i], u[i]);
-            v1[i] = var(fx[i], fy[i], g, &ts[i], r1[i].1, r1[i].2);
-        }
-        // The next RK4 stage at arc node `a`, a fraction of the step along the stage before.
-        for i in 0..3 {
-            let k = r1[i].0;
-            let a = seg[i].arc[2 * j + 1];
-            r2[i] = rhs(
-                fx[i],
-                fy[i],
-                a,
-                turn(e[i], 0.5 * h[i] * k[0]),
-                u[i] + 0.5 * h[i] * k[1],
-            );
-            v2[i] = var(
-                fx[i],
-                fy[i],
-                g,
-                &adv(&ts[i], &v1[i], 0.5 * h[i]),
-                r2[i].1,
-                r2[i].2,
-            );
-        }
-        for i in 0..3 {
-            let k = r2[i].0;
-            let a = seg[i].arc[2 * j + 1];
-            r3[i] = rhs(
-                fx[i],
-                fy[i],
-                a,
-                turn(e[i], 0.5 * h[i] * k[0]),
-                u[i] + 0.5 * h[i] * k[1],
-            );
-            v3[i] = var(
-                fx[i],
-                fy[i],
-                g,
-                &adv(&ts[i], &v2[i], 0.5 * h[i]),
-                r3[i].1,
-                r3[i].2,
-            );
-        }
-        for i in 0..3 {
-            let k = r3[i].0;
-            let a = seg[i].arc[2 * j + 2];
-            r4[i] = rhs(fx[i], fy[i], a, turn(e[i], h[i] * k[0]), u[i] + h[i] * k[1]);
-            v4[i] = var(
-                fx[i],
-                fy[i],
-                g,
-                &adv(&ts[i], &v3[i], h[i]),
-                r4[i].1,
-                r4[i].2,
-            );
-        }
+        let lanes = (seg, fx, fy, g, h);
+        let s1 = rk_var_stage(lanes, &e, &u, &ts, None, 2 * j, 0.0);
+        let s2 = rk_var_stage(lanes, &e, &u, &ts, Some(&s1), 2 * j + 1, 0.5);
+        let s3 = rk_var_stage(lanes, &e, &u, &ts, Some(&s2), 2 * j + 1, 0.5);
+        let s4 = rk_var_stage(lanes, &e, &u, &ts, Some(&s3), 2 * j + 2, 1.0);
         for i in 0..3 {
             let w = h[i] / 6.0;
-            let (k1, k2, k3, k4) = (r1[i].0, r2[i].0, r3[i].0, r4[i].0);
+            let (k1, k2, k3, k4) = (s1.0[i], s2.0[i], s3.0[i], s4.0[i]);
             let dd = w * (k1[0] + 2.0 * (k2[0] + k3[0]) + k4[0]);
             d[i] += dd;
             e[i] = turn(e[i], dd);
             u[i] += w * (k1[1] + 2.0 * (k2[1] + k3[1]) + k4[1]);
             x[i] += w * (k1[2] + 2.0 * (k2[2] + k3[2]) + k4[2]);
             y[i] += w * (k1[3] + 2.0 * (k2[3] + k3[3]) + k4[3]);
-            let (v1, v2, v3, v4) = (&v1[i], &v2[i], &v3[i], &v4[i]);
+            let (v1, v2, v3, v4) = (&s1.1[i], &s2.1[i], &s3.1[i], &s4.1[i]);
             for q in 0..3 {
                 let inc = |c: usize| w * (v1[q][c] + 2.0 * (v2[q][c] + v3[q][c]) + v4[q][c]);
                 ts[i][q][0] += inc(0);
@@ -424,6 +339,49 @@ fn deflect_jac3(
         ]
     });
     (out, jac)
+}
+
+/// A stage of [`deflect_jac3`]: the derivatives of the three lanes and of their tangents (d
+/// (delta, u) / d (f_x, f_y, u0)).
+type VarStage = ([[f64; 4]; 3], [[[f64; 4]; 3]; 3]);
+
+/// [`rk_stage`] with the variational equations: lane i's tangents `ts[i]` advanced as its state
+/// is, and their right-hand side at the stage. `lanes`: the segments, the tip forces over EI,
+/// 1 / EI and the steps.
+#[allow(clippy::type_complexity)]
+#[inline(always)]
+fn rk_var_stage(
+    lanes: (&[Segment; 3], [f64; 3], [f64; 3], f64, [f64; 3]),
+    e: &[[f64; 2]; 3],
+    u: &[f64; 3],
+    ts: &[[[f64; 2]; 3]; 3],
+    prev: Option<&VarStage>,
+    node: usize,
+    frac: f64,
+) -> VarStage {
+    let (seg, fx, fy, g, h) = lanes;
+    let mut out: VarStage = ([[0.0; 4]; 3], [[[0.0; 4]; 3]; 3]);
+    for i in 0..3 {
+        let (r, t) = match prev {
+            None => (rk_rhs(fx[i], fy[i], seg[i].arc[node], e[i], u[i]), ts[i]),
+            Some((k, v)) => {
+                let x = frac * h[i];
+                let ei = turn(e[i], x * k[i][0]);
+                let r = rk_rhs(fx[i], fy[i], seg[i].arc[node], ei, u[i] + x * k[i][1]);
+                let adv = |q: usize| [ts[i][q][0] + x * v[i][q][0], ts[i][q][1] + x * v[i][q][1]];
+                (r, [adv(0), adv(1), adv(2)])
+            }
+        };
+        let (c, s) = (r.1, r.2);
+        let m = c * fx[i] + s * fy[i];
+        out.0[i] = r.0;
+        out.1[i] = [
+            [t[0][1], m * t[0][0] + s * g, -s * t[0][0], c * t[0][0]],
+            [t[1][1], m * t[1][0] - c * g, -s * t[1][0], c * t[1][0]],
+            [t[2][1], m * t[2][0], -s * t[2][0], c * t[2][0]],
+        ];
+    }
+    out
 }
 
 /// (sin x, cos x): Taylor series, to x^6 for |x| <= 0.02, to x^10 for |x| <= 0.1, to x^14 for
