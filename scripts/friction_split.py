@@ -139,7 +139,10 @@ def main() -> int:
         print("error: --jobs must be at least 1", file=sys.stderr)
         return 2
     if args.pcr is None:
-        subprocess.run(["cargo", "build", "--release", "-q", "-p", "pcr"], cwd=ROOT, check=True)
+        if subprocess.run(["cargo", "build", "--release", "-q", "-p", "pcr"], cwd=ROOT).returncode:
+            print("error: the release build of pcr failed (give --pcr PATH to use another)",
+                  file=sys.stderr)
+            return 1
         target = Path(os.environ.get("CARGO_TARGET_DIR") or ROOT / "target")
         args.pcr = str(target / "release/pcr")
     with cf.ThreadPoolExecutor(max_workers=args.jobs) as pool:
