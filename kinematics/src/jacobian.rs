@@ -42,9 +42,27 @@ impl Robot {
 
     /// J = dx_E/dkappa = -A^-1 B (rows x mm, y mm, phi rad; columns kappa_i in 1/mm), or None
     /// where A is singular.
+    ///
+    /// Bit for bit `-jacobian_a^-1 diag(jacobian_b)`, with each leg's tip and the platform's
+    /// sin_cos computed once for both.
     pub fn jacobian(&self, pose: &Pose, kappa: &[f64; 3]) -> Option<Matrix3<f64>> {
-        let a = self.jacobian_a(pose, kappa);
-        let b = Matrix3::from_diagonal(&Vector3::from(self.jacobian_b(pose, kappa)));
+        let (s, c) = pose.phi.sin_cos();
+        let mut a = Matrix3::zeros();
+        let mut b = [0.0; 3];
+        for i in 0..3 {
+            let leg = &self.legs[i];
+            let v = leg.p_e;
+            let pe = [c * v[0] - s * v[1], s * v[0] + c * v[1]];
+            let tip = leg.local_tip(kappa[i] * leg.l_c);
+            let jp = g::add([pose.x, pose.y], pe);
+            let d = g::sub(jp, g::add(leg.b, leg.to_base(tip.m)));
+            a[(i, 0)] = 2.0 * d[0];
+            a[(i, 1)] = 2.0 * d[1];
+            a[(i, 2)] = 2.0 * g::dot(d, g::perp(pe));
+            let p = leg.to_local(g::sub(jp, leg.b));
+            b[i] = -2.0 * g::dot(g::sub(p, tip.m), tip.dm) * leg.l_c;
+        }
+        let b = Matrix3::from_diagonal(&Vector3::from(b));
         a.lu().solve(&b).map(|m| -m)
     }
 

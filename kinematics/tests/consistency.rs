@@ -271,3 +271,49 @@ fn table_scan_finds_every_root_a_fine_scan_finds() {
         }
     }
 }
+
+/// `in_mode` and `jacobian` share each leg's tip and the platform's sin_cos: they must be bit
+/// for bit what their building blocks (`jacobian_a`, `jacobian_b`, `joint_angles`) say, on
+/// poses in and out of the working mode (mirrored curvatures, flipped orientations).
+#[test]
+fn in_mode_and_the_jacobian_are_their_building_blocks_bit_for_bit() {
+    use nalgebra::{Matrix3, Vector3};
+    let r = Robot::nominal();
+    let mut rng = ChaCha8Rng::seed_from_u64(7);
+    let (mut inside, mut outside) = (0, 0);
+    for (p, k) in random_workspace_poses(&r, 300, 3) {
+        for trial in 0..4 {
+            let (p, k) = match trial {
+                0 => (p, k),
+                1 => (Pose::new(p.x, p.y, -p.phi), k),
+                2 => (p, [-k[0], k[1], -k[2]]),
+                _ => (
+                    Pose::new(
+                        p.x + rng.random_range(-30.0..30.0),
+                        p.y + rng.random_range(-30.0..30.0),
+                        p.phi + rng.random_range(-1.0..1.0),
+                    ),
+                    k,
+                ),
+            };
+            let det = r.jacobian_a(&p, &k).determinant();
+            let blocks = det.signum() == r.home_det_sign
+                && (0..3).all(|i| r.joint_angles(i, &p, k[i]).0 * r.mode[i].sign() > 0.0);
+            assert_eq!(r.in_mode(&p, &k), blocks, "{p:?} {k:?}");
+            if blocks {
+                inside += 1;
+            } else {
+                outside += 1;
+            }
+            let b = Matrix3::from_diagonal(&Vector3::from(r.jacobian_b(&p, &k)));
+            let j = r.jacobian_a(&p, &k).lu().solve(&b).map(|m| -m);
+            let got = r.jacobian(&p, &k);
+            assert_eq!(
+                got.map(|m| m.as_slice().iter().map(|x| x.to_bits()).collect::<Vec<_>>()),
+                j.map(|m| m.as_slice().iter().map(|x| x.to_bits()).collect::<Vec<_>>()),
+                "{p:?} {k:?}"
+            );
+        }
+    }
+    assert!(inside > 100 && outside > 30, "{inside} in, {outside} out");
+}
