@@ -57,7 +57,7 @@ impl Robot {
                 a[(i, 1)] = 2.0 * d[1];
                 a[(i, 2)] = 2.0 * g::dot(d, g::perp(pe));
             }
-            let dx = a.lu().solve(&(-h))?;
+            let dx = crate::lu3::Lu3::new(&a).solve(&(-h))?;
             x.x += dx[0];
             x.y += dx[1];
             x.phi += dx[2];

@@ -63,7 +63,7 @@ impl Robot {
             b[i] = -2.0 * g::dot(g::sub(p, tip.m), tip.dm) * leg.l_c;
         }
         let b = Matrix3::from_diagonal(&Vector3::from(b));
-        a.lu().solve(&b).map(|m| -m)
+        crate::lu3::Lu3::new(&a).solve_matrix(&b).map(|m| -m)
     }
 
     /// dx_E/dq: the Jacobian with respect to motor steps at motor positions q (steps).

@@ -12,6 +12,7 @@ pub mod friction;
 pub mod ik;
 pub mod jacobian;
 pub mod leg;
+pub mod lu3;
 pub mod model;
 pub mod pose;
 pub mod statics;
