@@ -55,7 +55,7 @@ impl Lu3 {
             for k in i + 1..3 {
                 let p = -m[i][k];
                 for r in i + 1..3 {
-                    m[r][k] = p * m[r][i] + m[r][k];
+                    m[r][k] += p * m[r][i];
                 }
             }
         }
@@ -73,7 +73,7 @@ impl Lu3 {
         for i in 0..2 {
             let c = -(b[i] / 1.0);
             for r in i + 1..3 {
-                b[r] = c * m[r][i] + b[r];
+                b[r] += c * m[r][i];
             }
         }
         for i in (0..3).rev() {
@@ -85,7 +85,7 @@ impl Lu3 {
             b[i] = c;
             let c = -c;
             for r in 0..i {
-                b[r] = c * m[r][i] + b[r];
+                b[r] += c * m[r][i];
             }
         }
         true
