@@ -26,18 +26,34 @@ pub fn solve(
     n: usize,
     cols: &dyn Fn(usize, &mut Columns),
 ) -> Option<LinearFit> {
-    solve_with_prior(ctx, idx, n, cols, None)
+    solve_with_prior(ctx, idx, n, cols, None, None)
+}
+
+/// Row `i`'s residual less `offset[i]` (a fixed change of the residual: an effect's part that
+/// has no free linear parameter), read where a fit reads the residual, instead of a copy of the
+/// context with its residuals shifted (every row's prediction copied: 15 MB on the sweep's
+/// recordings, for every value a profile tries).
+#[inline]
+fn residual(ctx: &Context, i: usize, offset: Option<&[[f64; 3]]>) -> [f64; 3] {
+    let mut r = ctx.rows[i].r;
+    if let Some(o) = offset {
+        for k in 0..3 {
+            r[k] -= o[i][k];
+        }
+    }
+    r
 }
 
 /// [`solve`] with a zero-mean Gaussian prior on the parameters: `prior[j]` = 1 / sigma_j^2
 /// (0 = free), added to the normal equations (a ridge; each Gauss-Newton step stays where the
-/// linearisation holds).
+/// linearisation holds), of the residuals less `offset` (one per row of `ctx`, if any).
 pub fn solve_with_prior(
     ctx: &Context,
     idx: &[usize],
     n: usize,
     cols: &dyn Fn(usize, &mut Columns),
     prior: Option<&[f64]>,
+    offset: Option<&[[f64; 3]]>,
 ) -> Option<LinearFit> {
     if n == 0 || idx.is_empty() {
         return None;
@@ -53,7 +69,7 @@ pub fn solve_with_prior(
     let mut rr = 0.0;
     for &i in idx {
         cols(i, &mut c);
-        let r = ctx.rows[i].r;
+        let r = residual(ctx, i, offset);
         rr += r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
         let (ata, atr) = per_block[ctx.rows[i].block]
             .get_or_insert_with(|| (DMatrix::zeros(n, n), DVector::zeros(n)));
@@ -86,6 +102,7 @@ pub fn solve_joint(
     effect: &dyn Fn(usize, &mut Columns),
     table: &crate::nuisance::NuisanceTable,
     prior: Option<&[f64]>,
+    offset: Option<&[[f64; 3]]>,
 ) -> Option<LinearFit> {
     let n_g = table.nui.n;
     let n = n_e + n_g;
@@ -112,7 +129,7 @@ pub fn solve_joint(
     for &i in idx {
         effect(i, &mut c);
         let g = &table.cols[i];
-        let r = ctx.rows[i].r;
+        let r = residual(ctx, i, offset);
         rr += r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
         let acc = per_block[ctx.rows[i].block].get_or_insert_with(|| Acc {
             ee: DMatrix::zeros(n_e, n_e),
@@ -304,6 +321,31 @@ pub fn deltas(
             for (a, col) in c.iter().enumerate() {
                 for k in 0..3 {
                     d[k] += col[k] * x[a];
+                }
+            }
+            d
+        })
+        .collect()
+}
+
+/// [`deltas`] of a joint fit ([`solve_joint`]): the effect's `n_e` columns, then the nuisance's
+/// from `table`, read in place (the same sums in the same order as [`deltas`] over the two
+/// copied into one set of columns).
+pub fn deltas_joint(
+    ctx: &Context,
+    n_e: usize,
+    x: &[f64],
+    effect: &dyn Fn(usize, &mut Columns),
+    table: &crate::nuisance::NuisanceTable,
+) -> Vec<[f64; 3]> {
+    let mut c: Columns = vec![[0.0; 3]; n_e];
+    (0..ctx.rows.len())
+        .map(|i| {
+            effect(i, &mut c);
+            let mut d = [0.0; 3];
+            for (col, xa) in c.iter().chain(&table.cols[i]).zip(x) {
+                for k in 0..3 {
+                    d[k] += col[k] * xa;
                 }
             }
             d

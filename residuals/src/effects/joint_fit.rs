@@ -52,24 +52,15 @@ pub(crate) fn fit_joint(
             c[n_e..n].copy_from_slice(&t.cols[i]);
         }
     };
-    // Residual with the offset taken out: solve on a shifted context copy of r.
-    let solve = |c: &Context| match &table {
-        Some(t) => linear::solve_joint(c, train, n_e, effect, t, Some(&prior)),
-        None => linear::solve_with_prior(c, train, n, &cols, Some(&prior)),
+    // The residual with the offset taken out.
+    let fit = match &table {
+        Some(t) => linear::solve_joint(ctx, train, n_e, effect, t, Some(&prior), offset),
+        None => linear::solve_with_prior(ctx, train, n, &cols, Some(&prior), offset),
+    }?;
+    let mut delta = match &table {
+        Some(t) => linear::deltas_joint(ctx, n_e, &fit.x, effect, t),
+        None => linear::deltas(ctx, n, &fit.x, &cols),
     };
-    let fit = match offset {
-        Some(o) => {
-            let mut shifted = ctx.clone();
-            for (row, d) in shifted.rows.iter_mut().zip(o) {
-                for k in 0..3 {
-                    row.r[k] -= d[k];
-                }
-            }
-            solve(&shifted)?
-        }
-        None => solve(ctx)?,
-    };
-    let mut delta = linear::deltas(ctx, n, &fit.x, &cols);
     if let Some(o) = offset {
         for (d, oo) in delta.iter_mut().zip(o) {
             for k in 0..3 {
