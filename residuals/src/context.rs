@@ -156,10 +156,13 @@ impl<'a> Context<'a> {
     /// every row in vain).
     pub fn same_rows(&self, model: ExtendedModel) -> Option<Context<'a>> {
         let started = std::time::Instant::now();
-        let mut want: Vec<std::collections::HashSet<usize>> =
-            vec![Default::default(); self.series.len()];
+        let mut want: Vec<Vec<bool>> = self
+            .series
+            .iter()
+            .map(|s| vec![false; s.samples.len()])
+            .collect();
         for r in &self.rows {
-            want[r.s].insert(r.k);
+            want[r.s][r.k] = true;
         }
         let failures = std::sync::atomic::AtomicUsize::new(0);
         let preds: Vec<Vec<Prediction>> = self
@@ -171,7 +174,7 @@ impl<'a> Context<'a> {
                     failures: Some((&failures, 0)),
                     ..Default::default()
                 };
-                model.predict_where_from(s, &|k| w.contains(&k), how)
+                model.predict_where_from(s, &|k| w[k], how)
             })
             .collect();
         if failures.load(std::sync::atomic::Ordering::Relaxed) > 0 {

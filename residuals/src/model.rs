@@ -30,6 +30,16 @@ use pcr_robot::effects::Effects;
 use pcr_robot::RobotConfig;
 use rayon::prelude::*;
 
+/// The rows `ks` of a series of `n` rows as a mask (what [`ExtendedModel::predict_where_from`]
+/// asks of every row: a lookup, not a hash).
+pub(crate) fn mask(n: usize, ks: &[usize]) -> Vec<bool> {
+    let mut m = vec![false; n];
+    for &k in ks {
+        m[k] = true;
+    }
+    m
+}
+
 /// Rows of a series solved in one pass (warm-started from row to row) by one thread.
 pub const PREDICT_CHUNK: usize = 2048;
 

@@ -271,7 +271,7 @@ impl Linearised {
             .iter()
             .zip(rows)
             .map(|(s, ks)| {
-                let want: std::collections::HashSet<usize> = ks.iter().copied().collect();
+                let want = crate::model::mask(s.samples.len(), ks);
                 let how = crate::model::Solving {
                     poses_only: rigid.is_some(),
                     ..Default::default()
@@ -279,7 +279,7 @@ impl Linearised {
                 rigid
                     .as_ref()
                     .unwrap_or(&model)
-                    .predict_where_from(s, &|k| want.contains(&k), how)
+                    .predict_where_from(s, &|k| want[k], how)
             })
             .collect();
         let at: Vec<(usize, usize)> = rows
@@ -518,13 +518,13 @@ impl Refit<'_> {
             .zip(&self.states)
             .enumerate()
         {
-            let want: std::collections::HashSet<usize> = rows.iter().copied().collect();
+            let want = crate::model::mask(s.samples.len(), rows);
             let how = crate::model::Solving {
                 states: Some(st),
                 poses_only: true,
                 ..Default::default()
             };
-            let mut preds = model.predict_where_from(s, &|i| want.contains(&i), how);
+            let mut preds = model.predict_where_from(s, &|i| want[i], how);
             if let Some(fr) = &self.friction {
                 for (r, &i) in rows.iter().enumerate() {
                     if let Some(p) = preds[i].pose.as_mut() {
