@@ -306,44 +306,23 @@ pub(crate) fn standard_errors(
         .collect()
 }
 
-/// The deltas (weighted pose changes) of every row for parameters `x`.
+/// The deltas (weighted pose changes) of every row for parameters `x`: the `n` columns of
+/// `cols`, then, with `table` (a joint fit, [`solve_joint`]), the nuisance's columns read in
+/// place, in that order.
 pub fn deltas(
     ctx: &Context,
     n: usize,
     x: &[f64],
     cols: &dyn Fn(usize, &mut Columns),
+    table: Option<&crate::nuisance::NuisanceTable>,
 ) -> Vec<[f64; 3]> {
     let mut c: Columns = vec![[0.0; 3]; n];
     (0..ctx.rows.len())
         .map(|i| {
             cols(i, &mut c);
+            let nuisance = table.map_or(&[][..], |t| &t.cols[i]);
             let mut d = [0.0; 3];
-            for (a, col) in c.iter().enumerate() {
-                for k in 0..3 {
-                    d[k] += col[k] * x[a];
-                }
-            }
-            d
-        })
-        .collect()
-}
-
-/// [`deltas`] of a joint fit ([`solve_joint`]): the effect's `n_e` columns, then the nuisance's
-/// from `table`, read in place (the same sums in the same order as [`deltas`] over the two
-/// copied into one set of columns).
-pub fn deltas_joint(
-    ctx: &Context,
-    n_e: usize,
-    x: &[f64],
-    effect: &dyn Fn(usize, &mut Columns),
-    table: &crate::nuisance::NuisanceTable,
-) -> Vec<[f64; 3]> {
-    let mut c: Columns = vec![[0.0; 3]; n_e];
-    (0..ctx.rows.len())
-        .map(|i| {
-            effect(i, &mut c);
-            let mut d = [0.0; 3];
-            for (col, xa) in c.iter().chain(&table.cols[i]).zip(x) {
+            for (col, xa) in c.iter().chain(nuisance).zip(x) {
                 for k in 0..3 {
                     d[k] += col[k] * xa;
                 }

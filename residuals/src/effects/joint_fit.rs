@@ -40,27 +40,18 @@ pub(crate) fn fit_joint(
     }
     let alone = match offset {
         Some(o) => Some(o.to_vec()),
-        None if n_e > 0 => {
-            linear::solve(ctx, train, n_e, effect).map(|f| linear::deltas(ctx, n_e, &f.x, effect))
-        }
+        None if n_e > 0 => linear::solve(ctx, train, n_e, effect)
+            .map(|f| linear::deltas(ctx, n_e, &f.x, effect, None)),
         None => None,
     };
     let table = (n_g > 0).then(|| ctx.nuisance());
-    let cols = |i: usize, c: &mut Columns| {
-        effect(i, c);
-        if let Some(t) = &table {
-            c[n_e..n].copy_from_slice(&t.cols[i]);
-        }
-    };
-    // The residual with the offset taken out.
+    // The residual with the offset taken out. Without the nuisance (n_g = 0) the effect's
+    // columns are all of them.
     let fit = match &table {
         Some(t) => linear::solve_joint(ctx, train, n_e, effect, t, Some(&prior), offset),
-        None => linear::solve_with_prior(ctx, train, n, &cols, Some(&prior), offset),
+        None => linear::solve_with_prior(ctx, train, n, effect, Some(&prior), offset),
     }?;
-    let mut delta = match &table {
-        Some(t) => linear::deltas_joint(ctx, n_e, &fit.x, effect, t),
-        None => linear::deltas(ctx, n, &fit.x, &cols),
-    };
+    let mut delta = linear::deltas(ctx, n_e, &fit.x, effect, table.as_deref());
     if let Some(o) = offset {
         for (d, oo) in delta.iter_mut().zip(o) {
             for k in 0..3 {
