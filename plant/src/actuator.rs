@@ -128,6 +128,12 @@ impl Actuator {
         limited
     }
 
+    /// The times (s) of the steps still planned in the current cycle, in order.
+    pub fn planned_step_times(&self) -> impl Iterator<Item = f64> + '_ {
+        let p = &self.plan;
+        (p.done + 1..=p.total.abs()).map(move |j| p.t0 + j as f64 * p.dt)
+    }
+
     /// Executes the planned steps due up to time `t`; returns whether any step happened.
     pub fn advance_to<R: Rng>(&mut self, t: f64, miss_probability: f64, rng: &mut R) -> bool {
         let mut moved = false;

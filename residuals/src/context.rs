@@ -64,7 +64,7 @@ pub struct Context<'a> {
 }
 
 /// The rigid pose (if any) and the curvatures of every row of one series.
-pub type Path = (Vec<Option<pcr_kinematics::Pose>>, Vec<[f64; 3]>);
+pub type Path = (crate::model::RigidPath, Vec<[f64; 3]>);
 
 /// The load responses of every row and how they were interpolated (`None`: every row solved,
 /// the exact model).

@@ -97,7 +97,7 @@ fn deflections(ctx: &Context, entry: &robot::Friction) -> Vec<Option<[f64; 3]>> 
         .par_iter()
         .map(|(rigid, kappa)| {
             if f.is_off() {
-                vec![Some([0.0; 3]); rigid.len()]
+                vec![Some([0.0; 3]); rigid.poses.len()]
             } else {
                 ctx.model.friction_path(rigid, kappa, &f)
             }
