@@ -2,7 +2,9 @@
 //! rows that reverse direction (a Lissajous path of 40 mm and 6 deg), at a tenth, once, three
 //! and ten times the prototype's friction (2 N mm per joint, 0.04 N per support), and of its
 //! derivatives at zero friction (`Robot::friction_onset`), with a checksum of the deflections to
-//! compare builds. Per row: the minimum over 8 repeats. Run:
+//! compare builds; then the same configurations as rows every fourth, the three between passed
+//! (`Robot::friction_pass`, the configurations a stair of steps passes between two rows), per
+//! configuration. Per row: the minimum over 8 repeats. Run:
 //! `cargo bench -p pcr-kinematics --bench friction`.
 
 use pcr_kinematics::friction::{Friction, FrictionState};
@@ -72,4 +74,33 @@ fn main() {
         "friction_onset     : {:6.2} us/row (checksum {sum:.9e})",
         1e6 * best / s.len() as f64
     );
+    for scale in [1.0, 3.0] {
+        let f = Friction {
+            joint_torque: 2.0 * scale,
+            support_force: 0.04 * scale,
+            ..f
+        };
+        let mut best = f64::INFINITY;
+        let mut sum = 0.0;
+        for _ in 0..8 {
+            let t0 = Instant::now();
+            let mut st = FrictionState::default();
+            sum = 0.0;
+            for (k, (kappa, p)) in s.iter().enumerate() {
+                if k % 4 == 0 {
+                    let d = r.friction_step(&f, p, black_box(kappa), &mut st).unwrap();
+                    sum += d[0].abs() + d[1].abs() + d[2].abs();
+                } else {
+                    r.friction_pass(&f, p, black_box(kappa), &mut st, None)
+                        .unwrap();
+                }
+            }
+            best = best.min(t0.elapsed().as_secs_f64());
+        }
+        println!(
+            "a row, 3 passed {:>4}x: {:6.2} us/configuration (checksum {sum:.9e})",
+            scale,
+            1e6 * best / s.len() as f64
+        );
+    }
 }

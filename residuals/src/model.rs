@@ -144,7 +144,7 @@ pub struct Sensitivity {
 fn along_path<T>(
     rigid: &RigidPath,
     kappa: &[[f64; 3]],
-    mut step: impl FnMut(&Pose, &[f64; 3], &mut FrictionState) -> Option<T>,
+    mut step: impl FnMut(&Pose, &[f64; 3], &mut FrictionState, Passing) -> Option<T>,
 ) -> Vec<Option<T>> {
     let mut state = FrictionState::default();
     rigid
@@ -156,12 +156,20 @@ fn along_path<T>(
             let p = p.as_ref()?;
             if let Some(stair) = rigid.stairs.get(k) {
                 for (q, kq) in stair {
-                    let _ = step(q, kq, &mut state);
+                    let _ = step(q, kq, &mut state, Passing::Between);
                 }
             }
-            step(p, kap, &mut state)
+            step(p, kap, &mut state, Passing::Row)
         })
         .collect()
+}
+
+/// Where [`along_path`] is: at a row (its answer kept) or passing a configuration on the stair
+/// before it ([`pcr_kinematics::Robot::friction_pass`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Passing {
+    Row,
+    Between,
 }
 
 /// Most configurations between two rows on a [`RigidPath`]'s stair: a leg that took more steps
@@ -424,8 +432,9 @@ impl ExtendedModel {
         kappa: &[[f64; 3]],
         f: &Friction,
     ) -> Vec<Option<[f64; 3]>> {
-        along_path(rigid, kappa, |p, k, state| {
-            self.robot.friction_step(f, p, k, state).ok()
+        along_path(rigid, kappa, |p, k, state, at| match at {
+            Passing::Row => self.robot.friction_step(f, p, k, state).ok(),
+            Passing::Between => self.robot.friction_pass(f, p, k, state, None).ok(),
         })
     }
 
@@ -440,10 +449,15 @@ impl ExtendedModel {
         f: &Friction,
     ) -> Vec<Option<DeflectionTangent>> {
         let mut tangent = pcr_kinematics::friction::FrictionTangent::default();
-        along_path(rigid, kappa, |p, k, state| {
-            self.robot
+        along_path(rigid, kappa, |p, k, state, at| match at {
+            Passing::Row => self
+                .robot
                 .friction_step_tangent(f, p, k, state, &mut tangent)
-                .ok()
+                .ok(),
+            Passing::Between => {
+                let _ = self.robot.friction_pass(f, p, k, state, Some(&mut tangent));
+                None
+            }
         })
     }
 
@@ -455,8 +469,11 @@ impl ExtendedModel {
         kappa: &[[f64; 3]],
         f: &Friction,
     ) -> Vec<Option<DeflectionAndJoints>> {
-        along_path(rigid, kappa, |p, k, state| {
-            let d = self.robot.friction_step(f, p, k, state).ok()?;
+        along_path(rigid, kappa, |p, k, state, at| {
+            let d = match at {
+                Passing::Row => self.robot.friction_step(f, p, k, state).ok()?,
+                Passing::Between => self.robot.friction_pass(f, p, k, state, None).ok()?,
+            };
             Some((d, state.joints()))
         })
     }
@@ -471,8 +488,12 @@ impl ExtendedModel {
         kappa: &[[f64; 3]],
         f: &Friction,
     ) -> Vec<Option<[[f64; 3]; 2]>> {
-        along_path(rigid, kappa, |p, k, state| {
-            self.robot.friction_onset(f, p, k, state).ok()
+        along_path(rigid, kappa, |p, k, state, at| match at {
+            Passing::Row => self.robot.friction_onset(f, p, k, state).ok(),
+            Passing::Between => {
+                let _ = self.robot.friction_onset_pass(f, p, k, state);
+                None
+            }
         })
     }
 
