@@ -533,15 +533,8 @@ impl Robot {
             Some(mid) => SmallLoads { x0: sl.x0, ..mid },
             None => sl,
         };
-        let FrictionState {
-            anchors,
-            d,
-            last,
-            held,
-            ..
-        } = state;
-        let sl = held.insert(sl);
-        settle(f, sl, &a, here, *kappa, (anchors, d, last), tangent)
+        state.held = Some(sl);
+        settle(f, &a, here, *kappa, state, tangent)
     }
 
     /// A configuration the path passes between two rows (a leg's step between two samples: the
@@ -559,23 +552,12 @@ impl Robot {
         state: &mut FrictionState,
         tangent: Option<&mut FrictionTangent>,
     ) -> Result<[f64; 3], FrictionError> {
-        if f.is_off() {
-            return self.friction_step_with(f, pose, kappa, state, tangent);
-        }
-        let FrictionState {
-            anchors: anchors @ Some(_),
-            d,
-            last,
-            held: Some(sl),
-            ..
-        } = state
-        else {
+        let (Some(a), Some(sl), false) = (state.anchors, state.held.as_mut(), f.is_off()) else {
             return self.friction_step_with(f, pose, kappa, state, tangent);
         };
-        let a = VE::from(anchors.unwrap_or_default());
         sl.x0 = self.coordinates(pose, kappa, &[[0.0; 2]; 3], |_, _, _| {});
         let here = [pose.x, pose.y, pose.phi];
-        settle(f, sl, &a, here, *kappa, (anchors, d, last), tangent)
+        settle(f, &VE::from(a), here, *kappa, state, tangent)
     }
 
     /// [`Robot::friction_onset`] at a configuration passed between two rows
@@ -672,39 +654,34 @@ impl Robot {
     }
 }
 
-/// The equilibrium of `sl` with the anchors `a` from the last tip displacements in `state`; the
-/// anchors of the elements that slipped follow, and `state` keeps the answer (the pose's change)
-/// as that of the configuration `here`, `kappa` (in the track).
+/// The equilibrium of the structure `state` holds with the anchors `a`, from the last tip
+/// displacements in `state`; the anchors of the elements that slipped follow, and `state` keeps
+/// the answer (the pose's change) as that of the configuration `here`, `kappa`.
 fn settle(
     f: &Friction,
-    sl: &SmallLoads,
     a: &VE,
     here: [f64; 3],
     kappa: [f64; 3],
-    (anchors, last_d, last): Track,
+    state: &mut FrictionState,
     tangent: Option<&mut FrictionTangent>,
 ) -> Result<[f64; 3], FrictionError> {
-    let d = equilibrium(f, sl, a, VD::from(*last_d))?;
+    // Every caller has just set the structure.
+    let Some(sl) = state.held.as_ref() else {
+        return Err(FrictionError::Singular);
+    };
+    let d = equilibrium(f, sl, a, VD::from(state.d))?;
     if let Some(tan) = tangent {
         tan.advance(f, sl, a, &d);
     }
     // The elements that slipped take their anchors along.
     let next = slipped(f, &(sl.x0 + sl.t * d), a);
-    *anchors = Some(next.into());
-    *last_d = d.into();
     let p = sl.h * d;
     let out = [p[0], p[1], p[2]];
-    *last = Some((here, kappa, out));
+    state.anchors = Some(next.into());
+    state.d = d.into();
+    state.last = Some((here, kappa, out));
     Ok(out)
 }
-
-/// What [`settle`] updates of a [`FrictionState`]: its anchors, tip displacements and last
-/// answer (borrowed beside the structure it holds).
-type Track<'s> = (
-    &'s mut Option<[f64; ELEMENTS]>,
-    &'s mut [f64; DOF],
-    &'s mut Option<([f64; 3], [f64; 3], [f64; 3])>,
-);
 
 /// The anchors `a` after the elements moved to `x`: those that slipped follow, each to its
 /// pre-sliding travel behind its coordinate.
