@@ -127,6 +127,10 @@ pub struct FrictionState {
     /// next row are answered with ([`Robot::friction_pass`]; its coordinates are the last
     /// configuration's).
     held: Option<SmallLoads>,
+    /// Per leg and direction of its curvature's change (falling, rising): how the tips moved
+    /// per unit of that change the last time that leg alone stepped that way (mm per 1/mm),
+    /// the next Newton start's predictor ([`settle`]).
+    per_step: [[Option<[f64; DOF]>; 2]; 3],
 }
 
 impl FrictionState {
@@ -669,7 +673,30 @@ fn settle(
     let Some(sl) = state.held.as_ref() else {
         return Err(FrictionError::Singular);
     };
-    let d = equilibrium(f, sl, a, VD::from(state.d))?;
+    // The Newton start: the last tips' displacement, moved by what each leg's step did the
+    // last time that leg alone stepped the same way. Between two rows the legs step in turn,
+    // and each step of a leg moves the tips about as its last one did, while one leg's step
+    // and the next leg's move them differently (the platform turns the supports' slip one way
+    // and then the other): along the path the tips zigzag by some hundredths of a mm, so that
+    // the last configuration's answer starts Newton a zigzag away, and this a few thousandths
+    // (on friction at 3x, 3.6 Newton steps instead of 5.0 per configuration).
+    let last = VD::from(state.d);
+    let change: Option<[f64; 3]> = state
+        .last
+        .map(|(_, k, _)| std::array::from_fn(|l| kappa[l] - k[l]));
+    let mut start = last;
+    for (l, &dk) in change.iter().flatten().enumerate() {
+        if let Some(g) = state.per_step[l][usize::from(dk > 0.0)].filter(|_| dk != 0.0) {
+            start += VD::from(g) * dk;
+        }
+    }
+    let d = equilibrium(f, sl, a, start, QUADRATIC)?;
+    if let Some(dk) = change {
+        let mut moved = (0..3).filter(|&l| dk[l] != 0.0);
+        if let (Some(l), None) = (moved.next(), moved.next()) {
+            state.per_step[l][usize::from(dk[l] > 0.0)] = Some(((d - last) / dk[l]).into());
+        }
+    }
     if let Some(tan) = tangent {
         tan.advance(f, sl, a, &d);
     }
@@ -711,13 +738,32 @@ fn slipped(f: &Friction, x: &VE, a: &VE) -> VE {
     next
 }
 
+/// A Newton step of the equilibrium below this (mm), taken whole with every element sticking or
+/// slipping as where it started, ends the iteration: within one pattern only the slipping
+/// supports' energy is not quadratic (its curvature turns over their pre-sliding travel), so
+/// that Newton converges quadratically and the step leaves the solution a few thousand times
+/// `|step|^2` (mm) away: 0.3e-6 to 8e-6 mm along a path at 1x to 10x the prototype's friction
+/// (a test holds it within 1e-5 mm), against a capture noise of some 0.07 mm. At 1e-4 that was
+/// 2e-5 mm, at 1e-5 0.04e-6 mm; the friction at 3x took 9.1 M Newton steps at 5e-5 against
+/// 9.6 M at 1e-5 and 8.9 M at 1e-4.
+const QUADRATIC: f64 = 5e-5;
+
 /// The tip displacements of the equilibrium of the small-load statics `sl` with the elements
 /// anchored at `a`, from `d`: the minimum of the potential energy of the segments and the
 /// elements, `1/2 d^T k d + sum_e phi_e(x_e(d) - a_e)` (convex, once differentiable), by
 /// Newton's method with a line search on the energy's slope along the step (its gradient's
 /// projection, which rounding does not blur as it does the energy's values, whose segments'
-/// stiff axial terms cancel).
-fn equilibrium(f: &Friction, sl: &SmallLoads, a: &VE, mut d: VD) -> Result<VD, FrictionError> {
+/// stiff axial terms cancel). A whole step whose slope at its end is within a tenth of the
+/// start's is taken (the line search's own stop, the strong Wolfe condition), and one below
+/// `quadratic` that keeps the elements' pattern ends the iteration ([`QUADRATIC`]; 0: run to
+/// rounding).
+fn equilibrium(
+    f: &Friction,
+    sl: &SmallLoads,
+    a: &VE,
+    mut d: VD,
+    quadratic: f64,
+) -> Result<VD, FrictionError> {
     let gradient = |d: &VD| -> (VD, Tangent) {
         let x = sl.x0 + sl.t * d;
         let (l, tan) = element_laws(f, &x, a);
@@ -741,8 +787,11 @@ fn equilibrium(f: &Friction, sl: &SmallLoads, a: &VE, mut d: VD) -> Result<VD, F
         let slope0 = grad.dot(&step);
         let (g1, dl1) = gradient(&(d + step));
         let slope1 = g1.dot(&step);
-        if slope1 <= 0.0 || !slope0.is_finite() {
+        if slope1 <= 0.1 * slope0.abs() || !slope0.is_finite() {
             d += step;
+            if step.amax() < quadratic && dl1.stuck == dl.stuck {
+                return Ok(d);
+            }
             (grad, dl) = (g1, dl1);
             // The tips' forces balance to a nanonewton: within 1e-8 mm of the solution for
             // segments of 0.1 N/mm and more.
@@ -789,6 +838,8 @@ fn equilibrium(f: &Friction, sl: &SmallLoads, a: &VE, mut d: VD) -> Result<VD, F
 struct Tangent {
     joints: [f64; 6],
     supports: [[f64; 3]; 6],
+    /// Bit e set where joint e sticks, bit 6 + q where support q does.
+    stuck: u32,
 }
 
 /// The elements' loads for their coordinates `x` and anchors `a`, and their tangent stiffness.
@@ -797,6 +848,7 @@ fn element_laws(f: &Friction, x: &VE, a: &VE) -> (VE, Tangent) {
     let mut t = Tangent {
         joints: [0.0; 6],
         supports: [[0.0; 3]; 6],
+        stuck: 0,
     };
     let (tj, fs) = (f.joint_torque, f.support_force);
     if tj > 0.0 {
@@ -806,6 +858,7 @@ fn element_laws(f: &Friction, x: &VE, a: &VE) -> (VE, Tangent) {
             if v.abs() <= tj {
                 l[e] = -v;
                 t.joints[e] = kj;
+                t.stuck |= 1 << e;
             } else {
                 l[e] = -tj * v.signum();
             }
@@ -821,6 +874,7 @@ fn element_laws(f: &Friction, x: &VE, a: &VE) -> (VE, Tangent) {
                 l[ix] = -v[0];
                 l[iy] = -v[1];
                 t.supports[p] = [ks, 0.0, ks];
+                t.stuck |= 1 << (6 + p);
             } else {
                 let u = [v[0] / n, v[1] / n];
                 l[ix] = -fs * u[0];
@@ -1331,7 +1385,7 @@ mod tests {
                 anchors = Some(sl.x0);
                 continue;
             };
-            let d1 = equilibrium(&f, &sl, &a, d).unwrap();
+            let d1 = equilibrium(&f, &sl, &a, d, QUADRATIC).unwrap();
             let p1 = sl.h * d1;
             let half = Pose::new(
                 pose.x + 0.5 * p1[0],
@@ -1341,7 +1395,7 @@ mod tests {
             let dm: [[f64; 2]; 3] = std::array::from_fn(|i| [0.5 * d1[2 * i], 0.5 * d1[2 * i + 1]]);
             let mid = r.small_loads_displaced(&half, &kappa, &dm, &st).unwrap();
             let mid = SmallLoads { x0: sl.x0, ..mid };
-            d = equilibrium(&f, &mid, &a, d1).unwrap();
+            d = equilibrium(&f, &mid, &a, d1, QUADRATIC).unwrap();
             anchors = Some(slipped(&f, &(mid.x0 + mid.t * d), &a));
             let p = mid.h * d;
             worst[0] = worst[0].max((p[0] - one[k][0]).hypot(p[1] - one[k][1]));
@@ -1472,6 +1526,75 @@ mod tests {
             assert!(terr < 0.05 * tsize, "{scale}x: {terr} of {tsize}");
             assert_eq!(oerr, 0.0, "{scale}x");
         }
+    }
+
+    /// Along a path whose legs step in turn between rows (four, three and two steps of each a
+    /// cycle, as the firmware spreads them), reversing, every configuration's equilibrium (the
+    /// predicted Newton start, the whole steps and the quadratic stop) is within 1e-5 mm of the
+    /// one run to rounding from no displacement, at 1x, 3x and 10x the prototype's friction.
+    #[test]
+    fn the_equilibrium_is_the_one_run_to_rounding_whatever_its_start() {
+        let r = Robot::nominal();
+        let rows: Vec<[f64; 3]> = lissajous(200, 0.02)
+            .iter()
+            .map(|p| r.ik(p).unwrap().kappa)
+            .collect();
+        let rates = [4usize, 3, 2];
+        let mut times: Vec<(usize, usize)> = (0..3)
+            .flat_map(|l| (1..rates[l]).map(move |j| (j, l)))
+            .collect();
+        times.sort_by(|a, b| (a.0 * rates[b.1]).cmp(&(b.0 * rates[a.1])));
+        for scale in [1.0, 3.0, 10.0] {
+            let f = Friction {
+                joint_torque: 2.0 * scale,
+                support_force: 0.04 * scale,
+                ..prototype()
+            };
+            let mut state = FrictionState::default();
+            let mut pose = r.fk(&rows[0]).unwrap();
+            let (mut worst, mut size, mut solved) = (0.0f64, 0.0f64, 0);
+            for k in 0..rows.len() {
+                // The configurations after each step between the row before and this one (each
+                // leg at its own even rate), then the row.
+                let mut stair = Vec::new();
+                if k > 0 {
+                    let mut kappa = rows[k - 1];
+                    for &(j, l) in &times {
+                        let (a, b) = (rows[k - 1][l], rows[k][l]);
+                        kappa[l] = a + (b - a) * j as f64 / rates[l] as f64;
+                        stair.push((kappa, Passing::Between));
+                    }
+                }
+                stair.push((rows[k], Passing::Row));
+                for (kappa, at) in stair {
+                    pose = r.fk_warm(&kappa, &pose).unwrap();
+                    let anchors = state.anchors;
+                    match at {
+                        Passing::Between => r.friction_pass(&f, &pose, &kappa, &mut state, None),
+                        Passing::Row => r.friction_step(&f, &pose, &kappa, &mut state),
+                    }
+                    .unwrap();
+                    let (Some(a), Some(sl)) = (anchors, state.held.as_ref()) else {
+                        continue;
+                    };
+                    let tight = equilibrium(&f, sl, &VE::from(a), VD::zeros(), 0.0).unwrap();
+                    let d = VD::from(state.d);
+                    worst = worst.max((d - tight).amax());
+                    size = size.max(tight.amax());
+                    solved += 1;
+                }
+            }
+            assert!(solved > 1000 && size > 0.05, "{scale}x: {solved} {size}");
+            assert!(worst < 1e-5, "{scale}x: {worst} mm of {size}");
+        }
+    }
+
+    /// Where [`the_equilibrium_is_the_one_run_to_rounding_whatever_its_start`] is: between two
+    /// rows or at one.
+    #[derive(Clone, Copy)]
+    enum Passing {
+        Between,
+        Row,
     }
 
     /// The written-out Hessian and Cholesky are nalgebra's sums and decomposition to rounding,

@@ -104,7 +104,7 @@ pub(crate) fn accept<'a>(
         if *s > min_gain * base_sse {
             break;
         }
-        step = effect.and_then(|e| e.fit(c, &c.train()));
+        step = effect.and_then(|e| e.step(c, &c.train()));
         // Nor is a step taken whose own linearised fit expects less than that: its prediction
         // of every training row would cost more than it brings (joint springs' fifth step: a
         // 0.02 % gain for a loaded prediction).

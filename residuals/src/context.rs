@@ -5,6 +5,7 @@ use crate::interpolation::Interpolation;
 use crate::model::{ExtendedModel, Prediction};
 use crate::nuisance::{Nuisance, NuisanceTable};
 use crate::series::{Blocks, Series};
+use pcr_kinematics::friction::Friction;
 use rayon::prelude::*;
 
 /// Rows of one series solved in sequence, warm-started from the row before (a chunk each for
@@ -61,7 +62,14 @@ pub struct Context<'a> {
     /// Per series, the rigid pose and the curvatures of every row (the path the friction runs
     /// along), computed on first use.
     paths: std::sync::OnceLock<std::sync::Arc<Vec<Path>>>,
+    /// The first friction tangent pass along [`Context::paths`] and the friction it was run at
+    /// ([`Context::friction_tangents`]).
+    friction_tangents: std::sync::OnceLock<(Friction, std::sync::Arc<Vec<Tangents>>)>,
 }
+
+/// A friction tangent pass along one series: per row, the deflection and its derivatives
+/// ([`crate::model::ExtendedModel::friction_path_tangent`]).
+pub type Tangents = Vec<Option<crate::model::DeflectionTangent>>;
 
 /// The rigid pose (if any) and the curvatures of every row of one series.
 pub type Path = (crate::model::RigidPath, Vec<[f64; 3]>);
@@ -208,6 +216,7 @@ impl<'a> Context<'a> {
             nuisance: std::sync::OnceLock::new(),
             loads: std::sync::OnceLock::new(),
             paths: std::sync::OnceLock::new(),
+            friction_tangents: std::sync::OnceLock::new(),
         })
     }
 
@@ -285,6 +294,7 @@ impl<'a> Context<'a> {
             nuisance: std::sync::OnceLock::new(),
             loads: std::sync::OnceLock::new(),
             paths: std::sync::OnceLock::new(),
+            friction_tangents: std::sync::OnceLock::new(),
         }
     }
 
@@ -484,6 +494,26 @@ impl<'a> Context<'a> {
                 )
             })
             .clone()
+    }
+
+    /// The friction tangent pass at `f` along every series' path ([`Context::paths`]), by
+    /// `run`; the first pass a context runs is kept and given again at the same friction (the
+    /// consistency check fits both parts of the data from the whole fit's values, in one
+    /// context).
+    pub fn friction_tangents(
+        &self,
+        f: &Friction,
+        run: impl FnOnce() -> Vec<Tangents>,
+    ) -> std::sync::Arc<Vec<Tangents>> {
+        if let Some((g, t)) = self.friction_tangents.get() {
+            if g == f {
+                return t.clone();
+            }
+            return std::sync::Arc::new(run());
+        }
+        let t = std::sync::Arc::new(run());
+        let _ = self.friction_tangents.set((*f, t.clone()));
+        t
     }
 
     /// The nuisance columns of every row (computed once per context).

@@ -120,6 +120,9 @@ pub struct Prediction {
     pub j_q: Matrix3<f64>,
     /// d pose / d kappa.
     pub j_kappa: Matrix3<f64>,
+    /// The friction's deflection that `pose` includes (x mm, y mm, phi rad); `None` without
+    /// friction or without a pose.
+    pub friction: Option<[f64; 3]>,
 }
 
 /// A row's predicted pose and its first-order responses ([`ExtendedModel::sensitivities`]).
@@ -321,6 +324,7 @@ impl ExtendedModel {
                         for c in 0..3 {
                             q[c] += d[c];
                         }
+                        p.friction = Some(d);
                     }
                     (Some(_), None) => {
                         p.pose = None;
@@ -598,6 +602,7 @@ impl ExtendedModel {
             kappa: std::array::from_fn(|i| self.robot.legs[i].map.kappa(dl_eff[i])),
             j_q: Matrix3::zeros(),
             j_kappa: Matrix3::zeros(),
+            friction: None,
         }
     }
 

@@ -422,6 +422,7 @@ mod tests {
                 kappa,
                 j_q: nalgebra::Matrix3::zeros(),
                 j_kappa,
+                friction: None,
             };
             let mut cols = vec![[0.0; 3]; nui.n];
             nui.columns(&robot, &pred, 1.0, &mut cols);

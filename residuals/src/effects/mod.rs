@@ -148,6 +148,12 @@ pub trait Effect: Extension {
     /// of the current model's residuals; `None` when it cannot be fitted.
     fn fit(&self, ctx: &Context, train: &[usize]) -> Option<Fitted>;
 
+    /// A Gauss-Newton step of its acceptance from a model that holds it: fits it again on
+    /// `train` ([`Effect::fit`] by default).
+    fn step(&self, ctx: &Context, train: &[usize]) -> Option<Fitted> {
+        self.fit(ctx, train)
+    }
+
     /// Fits it on `train` as the whole fit `whole` was made: its searched values (a motor, a
     /// period) kept, its continuous parameters fitted again. The consistency check compares
     /// parts of the data with it ([`crate::consistency`]). [`Effect::fit`] by default.
