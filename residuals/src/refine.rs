@@ -105,7 +105,8 @@ pub(crate) const SEARCH_ROWS: usize = 3000;
 /// reach the same cost in 3 or 4.
 const FIRST_RADIUS: f64 = 100.0;
 
-/// Most re-linearisations of the friction in one refinement ([`FrozenFriction`]).
+/// Most re-linearisations of the friction in a refinement that reports its errors
+/// ([`FrozenFriction`]; a search's refinement makes one).
 const FRICTION_RELINEARISATIONS: usize = 2;
 
 /// Most evaluations of the model in a refinement of the search (7-13 reach the tolerance).
@@ -139,7 +140,10 @@ type RowLinearisation = ([f64; 3], Vec<[f64; 3]>);
 /// deflection moves with the friction's parameters and hardly with the others' (a play or a
 /// calibration parameter moves the path it runs along by a fraction of a step): the
 /// refinement's steps are a chord method for it, and the search that calls the refinement
-/// again starts each time from the deflection of its own model.
+/// again starts each time from the deflection of its own model. Where a parameter that moves
+/// the path moved, the refinement linearises again where it arrived, and the deflection's
+/// change between the two linearisations gives it a secant by those parameters
+/// ([`FrozenFriction::update_secants`]).
 struct FrozenFriction {
     /// The slots of the parameters that act along the path (`Parameter::along_path`).
     slots: Vec<usize>,
@@ -148,6 +152,15 @@ struct FrozenFriction {
     /// Per series and refined row: the deflection at the start (x mm, y mm, phi rad), and its
     /// derivative by each of those parameters (solver's units).
     rows: Vec<Vec<RowLinearisation>>,
+    /// The slots of the parameters that move the curvatures (`Parameter::moves_curvatures`),
+    /// and with them the path the friction's history runs along.
+    path_slots: Vec<usize>,
+    /// Their values at the start (solver's units).
+    path_x0: Vec<f64>,
+    /// Per series and refined row, the deflection's secant by each of them (per solver's
+    /// unit): zero at a refinement's first linearisation, then Broyden's update at each
+    /// re-linearisation.
+    path: Vec<Vec<Vec<[f64; 3]>>>,
 }
 
 impl FrozenFriction {
@@ -202,11 +215,80 @@ impl FrozenFriction {
                     .collect()
             })
             .collect();
+        let path_slots: Vec<usize> = (0..slots.len())
+            .filter(|&p| slots[p].moves_curvatures)
+            .collect();
+        let path_x0 = path_slots
+            .iter()
+            .map(|&p| (slots[p].get)(&config.effects, slots[p].index))
+            .collect();
+        let path = per
+            .iter()
+            .map(|rows| vec![vec![[0.0; 3]; path_slots.len()]; rows.len()])
+            .collect();
         Some(FrozenFriction {
             slots: along,
             x0,
             rows: per,
+            path_slots,
+            path_x0,
+            path,
         })
+    }
+
+    /// The linearisation made again at `config` (the parameters `x`, every slot's), with the
+    /// secants by the path's parameters carried over from this one and updated
+    /// ([`Self::update_secants`]).
+    fn again(
+        &self,
+        config: &RobotConfig,
+        like: &ExtendedModel,
+        slots: &[Parameter],
+        series: &[Series],
+        rows: &[Vec<usize>],
+        x: &[f64],
+    ) -> Option<FrozenFriction> {
+        let mut next = FrozenFriction::new(config, like, slots, series, rows)?;
+        self.update_secants(&mut next, x);
+        Some(next)
+    }
+
+    /// Broyden's update of the secants by the path's parameters, from this linearisation to
+    /// `next` (made at the parameters `x`): what the deflection did beyond what this one
+    /// predicted at `x`, spread along the move of the path's parameters, so that `next`
+    /// predicts at this one's start what this one did there (to the change of the friction's
+    /// own tangents). The friction's columns are tangents; the path's cannot be (a play's or
+    /// a delay's derivative runs through every reversal after the row), and without a column
+    /// for them a refinement's steps stop short: the deflection held on the path where it was
+    /// pulls a play back towards the value that path had (backlash + friction at 3x: plays of
+    /// 0.1 -> 1.3 -> 2.7 steps in three linearisations, 9 the truth; with the secants 0.1 ->
+    /// 1.3 -> 4.4). Left as they were where the path's parameters did not move.
+    fn update_secants(&self, next: &mut FrozenFriction, x: &[f64]) {
+        let dx: Vec<f64> = self
+            .path_slots
+            .iter()
+            .zip(&self.path_x0)
+            .map(|(&p, x0)| x[p] - x0)
+            .collect();
+        let norm2: f64 = dx.iter().map(|d| d * d).sum();
+        if next.path_slots != self.path_slots {
+            return;
+        }
+        for (si, rows) in next.path.iter_mut().enumerate() {
+            for (r, secants) in rows.iter_mut().enumerate() {
+                let old = &self.path[si][r];
+                if norm2 == 0.0 {
+                    secants.clone_from(old);
+                    continue;
+                }
+                let was = self.at(si, r, x);
+                let now = next.rows[si][r].0;
+                let miss: [f64; 3] = std::array::from_fn(|c| now[c] - was[c]);
+                for ((g, old), d) in secants.iter_mut().zip(old).zip(&dx) {
+                    *g = std::array::from_fn(|c| old[c] + miss[c] * d / norm2);
+                }
+            }
+        }
     }
 
     /// The deflection of refined row `r` of series `s` at the parameters `x` (every slot's).
@@ -219,7 +301,22 @@ impl FrozenFriction {
                 d[c] += col[c] * dx;
             }
         }
+        for ((g, &p), x0) in self.path[s][r]
+            .iter()
+            .zip(&self.path_slots)
+            .zip(&self.path_x0)
+        {
+            let dx = x[p] - x0;
+            for c in 0..3 {
+                d[c] += g[c] * dx;
+            }
+        }
         d
+    }
+
+    /// Which of the path's secants slot `p` has, if it has one.
+    fn path_column(&self, p: usize) -> Option<usize> {
+        self.path_slots.iter().position(|&q| q == p)
     }
 
     /// Which of the linearised parameters slot `p` is, if it is one.
@@ -454,8 +551,14 @@ impl Refit<'_> {
             };
             match dloads {
                 Some(dl) => {
+                    let secant = self
+                        .friction
+                        .as_ref()
+                        .and_then(|f| f.path_column(p).map(|c| (f, c)));
                     let mut k = 0;
-                    for ((s, rows), sens) in self.series.iter().zip(&self.rows).zip(&sens) {
+                    for (si, ((s, rows), sens)) in
+                        self.series.iter().zip(&self.rows).zip(&sens).enumerate()
+                    {
                         // A load or the frame leaves the curvatures where they are at `x`.
                         let moved = self.slots[p]
                             .moves_curvatures
@@ -472,10 +575,12 @@ impl Refit<'_> {
                                     for (c, d) in sn.d_loads.iter().zip(&dl) {
                                         dp += nalgebra::Vector3::from(*c) * *d;
                                     }
+                                    // The friction's secant along the path, if any.
+                                    let g = secant.map_or([0.0; 3], |(fr, c)| fr.path[si][r][c]);
                                     [
-                                        (m1[0] - m0[0] - dp[0]) / h,
-                                        (m1[1] - m0[1] - dp[1]) / h,
-                                        self.w_phi * (wrap(m1[2] - m0[2]) - dp[2]) / h,
+                                        (m1[0] - m0[0] - dp[0]) / h - g[0],
+                                        (m1[1] - m0[1] - dp[1]) / h - g[1],
+                                        self.w_phi * ((wrap(m1[2] - m0[2]) - dp[2]) / h - g[2]),
                                     ]
                                 }
                                 _ => [0.0; 3],
@@ -754,7 +859,10 @@ pub(crate) fn refine_with_errors(
     // curvatures left it (a play of 5.4 steps refined to 3 moves every reversal by more than a
     // step): linearised again where the refinement arrived and refined from there, while they
     // move.
-    for _ in 0..FRICTION_RELINEARISATIONS {
+    // A search's refinement (no errors) is refined again by the one that reports the errors,
+    // on every row: it re-linearises once.
+    let relinearisations = if errors { FRICTION_RELINEARISATIONS } else { 1 };
+    for _ in 0..relinearisations {
         let Ok(f) = &fit else { break };
         let moved = p.friction.is_some()
             && p.slots.iter().enumerate().any(|(k, s)| {
@@ -764,7 +872,11 @@ pub(crate) fn refine_with_errors(
             break;
         }
         let here = p.config(&f.x);
-        let Some(frozen) = FrozenFriction::new(&here, like, &p.slots, series, &p.rows) else {
+        let Some(frozen) = p
+            .friction
+            .as_ref()
+            .and_then(|fr| fr.again(&here, like, &p.slots, series, &p.rows, &f.x))
+        else {
             break;
         };
         let start = f.x.clone();
@@ -879,6 +991,63 @@ mod tests {
             }),
             ..Effects::default()
         }
+    }
+
+    /// A linearisation of the friction by hand: slot 0 a friction value along the path (its
+    /// column `col`), slots 1 and 2 parameters that move the path, one series of two rows.
+    fn frozen(x0: [f64; 3], b: [[f64; 3]; 2], col: [f64; 3]) -> FrozenFriction {
+        FrozenFriction {
+            slots: vec![0],
+            x0: vec![x0[0]],
+            rows: vec![b.iter().map(|b| (*b, vec![col])).collect()],
+            path_slots: vec![1, 2],
+            path_x0: vec![x0[1], x0[2]],
+            path: vec![vec![vec![[0.0; 3]; 2]; 2]],
+        }
+    }
+
+    /// Broyden's update of the path's secants: linearised again at x1, the deflection predicts
+    /// at the first linearisation's start what the first did there (the friction's tangent
+    /// unchanged), along the path parameters' move and only along it; a second update keeps
+    /// that for the move before it in the direction it shares; without a move the secants
+    /// stay.
+    #[test]
+    fn the_friction_relinearised_keeps_the_deflection_it_had_where_it_was() {
+        let col = [0.3, -0.2, 0.01];
+        let x0 = [1.0, 2.0, 5.0];
+        let old = frozen(x0, [[0.1, 0.2, 0.0], [-0.3, 0.05, 0.002]], col);
+        let x1 = [1.5, 3.0, 4.0];
+        // At x1 the deflection is not what the frozen one said: the path moved.
+        let miss = [[0.04, -0.02, 0.001], [0.0, 0.07, -0.003]];
+        let b1: [[f64; 3]; 2] = std::array::from_fn(|r| {
+            let was = old.at(0, r, &x1);
+            std::array::from_fn(|c| was[c] + miss[r][c])
+        });
+        let mut next = frozen(x1, b1, col);
+        old.update_secants(&mut next, &x1);
+        for r in 0..2 {
+            // Exact at its own start, as the pass says.
+            assert_eq!(next.at(0, r, &x1), b1[r]);
+            // Back at x0: the first linearisation's deflection there.
+            let back = next.at(0, r, &x0);
+            for c in 0..3 {
+                assert!(
+                    (back[c] - old.at(0, r, &x0)[c]).abs() < 1e-14,
+                    "row {r}: {back:?}"
+                );
+            }
+            // Across the move (slot 2 moved by -1 for slot 1's +1): no slope.
+            let across = [x1[0], x1[1] + 1.0, x1[2] + 1.0];
+            for c in 0..3 {
+                assert!((next.at(0, r, &across)[c] - b1[r][c]).abs() < 1e-14);
+            }
+        }
+        // No move of the path: the secants carry over.
+        let x2 = [2.0, x1[1], x1[2]];
+        let mut still = frozen(x2, b1, col);
+        next.update_secants(&mut still, &x2);
+        assert_eq!(still.path, next.path);
+        assert!(next.path[0][0][0] != [0.0; 3]);
     }
 
     /// The errors of the solver's parameters come out in the units the report gives, for the
