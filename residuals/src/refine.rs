@@ -274,13 +274,13 @@ impl FrozenFriction {
         if next.path_slots != self.path_slots {
             return;
         }
+        if norm2 == 0.0 {
+            next.path.clone_from(&self.path);
+            return;
+        }
         for (si, rows) in next.path.iter_mut().enumerate() {
             for (r, secants) in rows.iter_mut().enumerate() {
                 let old = &self.path[si][r];
-                if norm2 == 0.0 {
-                    secants.clone_from(old);
-                    continue;
-                }
                 let was = self.at(si, r, x);
                 let now = next.rows[si][r].0;
                 let miss: [f64; 3] = std::array::from_fn(|c| now[c] - was[c]);
@@ -295,20 +295,17 @@ impl FrozenFriction {
     fn at(&self, s: usize, r: usize, x: &[f64]) -> [f64; 3] {
         let (b, cols) = &self.rows[s][r];
         let mut d = *b;
-        for ((col, &p), x0) in cols.iter().zip(&self.slots).zip(&self.x0) {
-            let dx = x[p] - x0;
-            for c in 0..3 {
-                d[c] += col[c] * dx;
-            }
-        }
-        for ((g, &p), x0) in self.path[s][r]
-            .iter()
-            .zip(&self.path_slots)
-            .zip(&self.path_x0)
-        {
-            let dx = x[p] - x0;
-            for c in 0..3 {
-                d[c] += g[c] * dx;
+        // The tangents by the friction's values, then the secants by the path's parameters.
+        let moves = [
+            (cols, &self.slots, &self.x0),
+            (&self.path[s][r], &self.path_slots, &self.path_x0),
+        ];
+        for (cols, slots, x0) in moves {
+            for ((col, &p), x0) in cols.iter().zip(slots).zip(x0) {
+                let dx = x[p] - x0;
+                for c in 0..3 {
+                    d[c] += col[c] * dx;
+                }
             }
         }
         d
