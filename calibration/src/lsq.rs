@@ -57,6 +57,9 @@ pub enum Status {
     Step,
     /// Both `ftol` and `xtol` were met.
     CostAndStep,
+    /// The cost fell by less than `stall_ftol` of itself over the last `stall_window` steps
+    /// taken ([`Options::stall_window`]).
+    Stalled,
     /// The evaluation budget ran out.
     MaxEvaluations,
 }
@@ -89,6 +92,14 @@ pub struct Options {
     /// The initial trust-region radius as a multiple of the starting point's length in the
     /// scaled variables (MINPACK's `factor`; 1 is SciPy's `trf`, MINPACK's default is 100).
     pub initial_radius_factor: f64,
+    /// Steps taken over which the cost must fall by at least `stall_ftol` of itself, or the
+    /// iteration ends ([`Status::Stalled`]); 0 (the default): no such test. Where the residuals
+    /// are not smooth at the level of the last steps' gains (a model solved iteratively, each
+    /// evaluation from the last one's solution), the solver otherwise crawls along a flat
+    /// valley with steps that each gain just more than `ftol`, some of them refused.
+    pub stall_window: usize,
+    /// See [`Options::stall_window`].
+    pub stall_ftol: f64,
 }
 
 impl Default for Options {
@@ -100,6 +111,8 @@ impl Default for Options {
             max_evaluations: 1000,
             jacobian_at_end: true,
             initial_radius_factor: 1.0,
+            stall_window: 0,
+            stall_ftol: 0.0,
         }
     }
 }
@@ -254,6 +267,8 @@ pub fn solve<P: Problem + ?Sized>(
     let m = p.residual_count();
     check_setup(x0, lower, upper, m)?;
     let mut solver = Solver::start(p, x0, lower, upper, m, opt)?;
+    // The cost after each step taken, the start's first (the stall test).
+    let mut costs = vec![solver.cost()];
     let status = loop {
         let (v, dv) = solver.coleman_li_scaling();
         let g_norm = solver.scaled_gradient_norm(&v);
@@ -264,7 +279,15 @@ pub fn solve<P: Problem + ?Sized>(
             break Status::MaxEvaluations;
         }
         let sub = solver.subproblem(v, &dv, g_norm)?;
-        let search = solver.search_step(&sub);
+        let mut search = solver.search_step(&sub);
+        if search.lowered_cost() && search.status.is_none() && opt.stall_window > 0 {
+            let now = solver.cost() - search.actual_reduction;
+            costs.push(now);
+            let (n, w) = (costs.len(), opt.stall_window);
+            if n > w && costs[n - 1 - w] - now < opt.stall_ftol * now {
+                search.status = Some(Status::Stalled);
+            }
+        }
         if search.lowered_cost() && search.status.is_some() && !opt.jacobian_at_end {
             solver.take_trial();
         } else if search.lowered_cost() {
@@ -471,6 +494,66 @@ mod tests {
         assert_eq!(with.evaluations, without.evaluations);
         assert_eq!(n_without + 1, n_with);
         assert_eq!(without.jacobians, n_without);
+    }
+
+    /// [`Exp`] whose residuals carry a jitter (0.0003 each) that the Jacobian (analytic) does
+    /// not see: a model solved iteratively, each evaluation from the last one's solution.
+    struct Jittered;
+    impl Problem for Jittered {
+        fn residual_count(&self) -> usize {
+            20
+        }
+        fn residuals(&mut self, x: &[f64], r: &mut [f64]) -> Result<(), String> {
+            Exp.residuals(x, r)?;
+            for (k, r) in r.iter_mut().enumerate() {
+                *r += 3e-4 * (1e7 * x[0] + 1e6 * x[1] + k as f64).sin();
+            }
+            Ok(())
+        }
+        fn jacobian(
+            &mut self,
+            x: &[f64],
+            _r: &[f64],
+            _upper: &[f64],
+            j: &mut DMatrix<f64>,
+        ) -> Result<(), String> {
+            for k in 0..20 {
+                let t = k as f64 / 10.0;
+                j[(k, 0)] = (x[1] * t).exp();
+                j[(k, 1)] = x[0] * t * (x[1] * t).exp();
+            }
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn a_stalled_cost_ends_the_iteration_near_the_optimum_in_fewer_evaluations() {
+        let run = |stall_window, stall_ftol| {
+            let opt = Options {
+                stall_window,
+                stall_ftol,
+                initial_radius_factor: 100.0,
+                ..Options::default()
+            };
+            solve(&mut Jittered, &[1.0, 0.1], &[-INF; 2], &[INF; 2], &opt).unwrap()
+        };
+        let full = run(0, 0.0);
+        // Over two steps the cost must fall by 1 % of itself: the jitter's steps take less.
+        let stalled = run(2, 1e-2);
+        assert_eq!(stalled.status, Status::Stalled);
+        assert!(stalled.status.converged());
+        assert!(
+            stalled.evaluations < full.evaluations,
+            "{} against {} evaluations",
+            stalled.evaluations,
+            full.evaluations
+        );
+        assert!(
+            stalled.cost < 1.02 * full.cost,
+            "{} against {}",
+            stalled.cost,
+            full.cost
+        );
     }
 
     #[test]

@@ -60,10 +60,12 @@ impl Estimate {
     }
 }
 
-/// The change an accepted candidate makes to the robot file.
-pub type Change = Box<dyn Fn(&mut RobotConfig) + Send + Sync>;
+/// The change an accepted candidate makes to the robot file (shared: a search that goes back
+/// to a round takes that round's fits again).
+pub type Change = std::sync::Arc<dyn Fn(&mut RobotConfig) + Send + Sync>;
 
 /// A candidate fitted to the training rows.
+#[derive(Clone)]
 pub struct Fitted {
     /// Vocabulary name.
     pub name: &'static str,

@@ -43,7 +43,7 @@ pub(super) struct Solver<'a, P: Problem + ?Sized> {
 /// How a search for a step ended.
 pub(super) struct Search {
     /// Cost reduction of the last step evaluated (-1 when none could be).
-    actual_reduction: f64,
+    pub(super) actual_reduction: f64,
     /// Set when the last step met the convergence test.
     pub(super) status: Option<Status>,
 }
@@ -109,6 +109,11 @@ impl<'a, P: Problem + ?Sized> Solver<'a, P> {
             .zip(v.iter())
             .map(|(a, b)| (a * b).abs())
             .fold(0.0, f64::max)
+    }
+
+    /// 0.5 |f|^2 at the current point.
+    pub(super) fn cost(&self) -> f64 {
+        self.cost
     }
 
     /// Whether the residual evaluations have reached the budget.

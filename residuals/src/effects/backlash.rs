@@ -169,7 +169,7 @@ impl Effect for Backlash {
             delta,
             alone,
             train_sse: fit.sse,
-            change: Box::new(move |c| {
+            change: std::sync::Arc::new(move |c| {
                 c.effects.backlash = Some(robot::Backlash { steps: b });
                 nuis(c);
             }),

@@ -103,7 +103,7 @@ pub(crate) fn fit(
             // errs toward the recalibration, which the search then judges on the drawing.
             alone: f.alone,
             train_sse: g.train_sse,
-            change: Box::new(move |c| {
+            change: std::sync::Arc::new(move |c| {
                 first(c);
                 second(c);
             }),
@@ -165,7 +165,7 @@ fn fit_at(ctx: &Context, train: &[usize], name: &'static str, which: &[usize]) -
         delta,
         alone,
         train_sse: fit.sse,
-        change: Box::new(move |c| {
+        change: std::sync::Arc::new(move |c| {
             c.effects.compliance = Some(new.clone());
             nuis(c);
         }),

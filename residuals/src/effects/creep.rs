@@ -147,7 +147,7 @@ impl Effect for Creep {
             delta,
             alone,
             train_sse: fit.sse,
-            change: Box::new(move |c| {
+            change: std::sync::Arc::new(move |c| {
                 c.effects.creep = Some(robot::Creep {
                     gain,
                     time_constant_s: t_c,

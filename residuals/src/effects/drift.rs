@@ -96,7 +96,7 @@ impl Effect for Drift {
             delta,
             alone,
             train_sse: fit.sse,
-            change: Box::new(move |c| {
+            change: std::sync::Arc::new(move |c| {
                 c.effects.drift = Some(robot::Drift {
                     rate_mm_per_s: rate,
                 });

@@ -99,7 +99,7 @@ impl Effect for Frame {
             delta,
             alone,
             train_sse: fit.sse,
-            change: Box::new(move |c| {
+            change: std::sync::Arc::new(move |c| {
                 c.effects.frame = Some(f.clone());
                 nuis(c);
             }),

@@ -325,7 +325,7 @@ fn fit_from(
         delta,
         alone,
         train_sse: lin.sse,
-        change: Box::new(move |c: &mut RobotConfig| {
+        change: std::sync::Arc::new(move |c: &mut RobotConfig| {
             c.effects.friction = Some(new.clone());
             nuis(c);
         }),

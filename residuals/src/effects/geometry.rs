@@ -50,7 +50,7 @@ impl Effect for Geometry {
             delta,
             alone,
             train_sse: sse,
-            change: Box::new(move |c| nui.apply(&x, c)),
+            change: std::sync::Arc::new(move |c| nui.apply(&x, c)),
         })
     }
 

@@ -72,7 +72,7 @@ impl Effect for Latency {
             delta,
             alone,
             train_sse: fit.sse,
-            change: Box::new(move |c| {
+            change: std::sync::Arc::new(move |c| {
                 c.effects.latency = Some(robot::Latency { latency_s: tau });
                 nuis(c);
             }),

@@ -205,7 +205,7 @@ impl Periodic {
             delta,
             alone,
             train_sse: fit.sse,
-            change: Box::new(move |c| {
+            change: std::sync::Arc::new(move |c| {
                 c.effects.periodic.push(entry.clone());
                 nuis(c);
             }),

@@ -91,7 +91,7 @@ impl Effect for TendonMap {
             delta,
             alone,
             train_sse: fit.sse,
-            change: Box::new(move |c| {
+            change: std::sync::Arc::new(move |c| {
                 nuis(c);
                 let travel = pcr_kinematics::Robot::new(c)
                     .ok()
