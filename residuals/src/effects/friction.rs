@@ -22,6 +22,7 @@
 use super::joint_fit::{fit_joint, nuisance_change};
 use super::{lerp, Effect, Parameter};
 use crate::context::Context;
+use crate::context::Tangents;
 use crate::extension::Extension;
 use crate::fitted::{Estimate, Fitted};
 use crate::linear::Columns;
@@ -132,6 +133,20 @@ struct Step {
     /// The step of each fitted value (zero for one not fitted) and its standard error.
     x: Theta,
     sd: [Option<f64>; 3],
+    /// The tangent pass it was linearised with, per series (empty for a series it skipped:
+    /// [`Scope::Training`]); `None` from no friction.
+    per: Option<std::sync::Arc<Vec<Tangents>>>,
+}
+
+/// The rows a step's tangent pass must answer.
+#[derive(Clone, Copy, PartialEq)]
+enum Scope {
+    /// Every row: the step whose change is scored.
+    All,
+    /// The series with training rows alone: a step the fit goes on from, whose change at the
+    /// held-out rows is not read (the held-out recording's 16.8k rows of 60.9k are a quarter of
+    /// a pass).
+    Training,
 }
 
 /// One linearised fit of the friction with the calibration parameters about `theta` (the
@@ -139,6 +154,9 @@ struct Step {
 /// friction the columns of the limits are their derivatives at zero (the pre-sliding travel
 /// has none there, and keeps its value); elsewhere the derivatives of the whole path at
 /// `theta` (the tangent pass), the joints' pre-sliding travel among them while the joints rub.
+/// `scope` says which series its tangent pass runs on; `reuse`, a pass at `theta` already
+/// made, whose series are taken as they are (the others run).
+#[allow(clippy::too_many_arguments)]
 fn step_at(
     ctx: &Context,
     train: &[usize],
@@ -146,6 +164,8 @@ fn step_at(
     at: &[Option<[f64; 3]>],
     theta: Theta,
     held: [bool; 3],
+    scope: Scope,
+    reuse: Option<&[Tangents]>,
 ) -> Option<Step> {
     let n = ctx.rows.len();
     let rubs = theta[0] != 0.0 || theta[1] != 0.0;
@@ -170,6 +190,7 @@ fn step_at(
         _ => [0.0; 3],
     };
     // Per row: the change from the model's friction to `theta` (the offset), and the columns.
+    let mut pass = None;
     let (offset, cols): (Vec<[f64; 3]>, Vec<Vec<[f64; 3]>>) = if !rubs {
         let f = Rubbing::from_effect(&with_values(entry, theta));
         let paths = ctx.paths();
@@ -191,15 +212,39 @@ fn step_at(
     } else {
         // The deflection at `theta` and its derivatives, in one pass along each series.
         let f = Rubbing::from_effect(&with_values(entry, theta));
-        let per = ctx.friction_tangents(&f, || {
-            ctx.paths()
-                .par_iter()
-                .map(|(rigid, kappa)| ctx.model.friction_path_tangent(rigid, kappa, &f))
-                .collect()
-        });
+        let per = if scope == Scope::All && reuse.is_none() {
+            ctx.friction_tangents(&f, || {
+                ctx.paths()
+                    .par_iter()
+                    .map(|(rigid, kappa)| ctx.model.friction_path_tangent(rigid, kappa, &f))
+                    .collect()
+            })
+        } else {
+            let mut wanted = vec![scope == Scope::All; ctx.series.len()];
+            for &i in train {
+                wanted[ctx.rows[i].s] = true;
+            }
+            std::sync::Arc::new(
+                ctx.paths()
+                    .par_iter()
+                    .enumerate()
+                    .map(|(s, (rigid, kappa))| {
+                        match reuse.and_then(|r| r.get(s)).filter(|t| !t.is_empty()) {
+                            Some(t) => t.clone(),
+                            None if wanted[s] => ctx.model.friction_path_tangent(rigid, kappa, &f),
+                            None => Vec::new(),
+                        }
+                    })
+                    .collect(),
+            )
+        };
         let w = |d: [f64; 3]| [d[0], d[1], ctx.w_phi * d[2]];
-        let at_theta: Vec<Option<DeflectionTangent>> =
-            ctx.rows.iter().map(|r| per[r.s][r.k]).collect();
+        let at_theta: Vec<Option<DeflectionTangent>> = ctx
+            .rows
+            .iter()
+            .map(|r| per[r.s].get(r.k).copied().flatten())
+            .collect();
+        pass = Some(per.clone());
         let offset = (0..n)
             .map(|i| diff(at_theta[i].map(|(d, _)| w(d)), at[i]))
             .collect();
@@ -227,7 +272,12 @@ fn step_at(
         x[j] = fit.0.x[a] * SCALE[j];
         sd[j] = Some(fit.0.std[a] * SCALE[j]);
     }
-    Some(Step { fit, x, sd })
+    Some(Step {
+        fit,
+        x,
+        sd,
+        per: pass,
+    })
 }
 
 /// The values after a step `x` from `theta`: the limits not below zero, the pre-sliding travel
@@ -258,7 +308,14 @@ fn fit_from(
     let at = deflections(ctx, &entry);
     let mut theta = start.unwrap_or(values_of(&entry));
     let mut bound = [false, false, !free_presliding];
-    let mut step = step_at(ctx, train, &entry, &at, theta, bound)?;
+    // The steps the fit goes on from need the training rows alone; the last one, whose change
+    // is scored, every row (its pass completed on the series skipped).
+    let scope = if steps > 1 {
+        Scope::Training
+    } else {
+        Scope::All
+    };
+    let mut step = step_at(ctx, train, &entry, &at, theta, bound, scope, None)?;
     // The training error the calibration parameters alone leave (what a friction's step must
     // improve on).
     let sse0 = || {
@@ -273,7 +330,7 @@ fn fit_from(
             if bound[0] && bound[1] {
                 return None;
             }
-            step = step_at(ctx, train, &entry, &at, theta, bound)?;
+            step = step_at(ctx, train, &entry, &at, theta, bound, scope, None)?;
             continue;
         }
         if left == 0 {
@@ -293,9 +350,21 @@ fn fit_from(
             break;
         }
         theta = next;
-        step = step_at(ctx, train, &entry, &at, theta, bound)?;
+        step = step_at(ctx, train, &entry, &at, theta, bound, scope, None)?;
     }
-    let Step { fit, x, sd } = step;
+    if let Some(per) = step.per.clone().filter(|p| p.iter().any(Vec::is_empty)) {
+        step = step_at(
+            ctx,
+            train,
+            &entry,
+            &at,
+            theta,
+            bound,
+            Scope::All,
+            Some(&per),
+        )?;
+    }
+    let Step { fit, x, sd, .. } = step;
     let (lin, delta, alone) = fit;
     let value = [theta[0] + x[0], theta[1] + x[1], stepped(theta, x)[2]];
     let new = with_values(&entry, value);
