@@ -133,20 +133,23 @@ struct Step {
     /// The step of each fitted value (zero for one not fitted) and its standard error.
     x: Theta,
     sd: [Option<f64>; 3],
-    /// The tangent pass it was linearised with, per series (empty for a series it skipped:
-    /// [`Scope::Training`]); `None` from no friction.
-    per: Option<std::sync::Arc<Vec<Tangents>>>,
+    /// The tangent pass it was linearised with, per series, where it skipped the series
+    /// without training rows ([`Scope::Training`]): what [`Scope::Complete`] takes again.
+    partial: Option<std::sync::Arc<Vec<Tangents>>>,
 }
 
 /// The rows a step's tangent pass must answer.
-#[derive(Clone, Copy, PartialEq)]
-enum Scope {
+#[derive(Clone, Copy)]
+enum Scope<'p> {
     /// Every row: the step whose change is scored.
     All,
     /// The series with training rows alone: a step the fit goes on from, whose change at the
     /// held-out rows is not read (the held-out recording's 16.8k rows of 60.9k are a quarter of
     /// a pass).
     Training,
+    /// Every row, the series with training rows taken from a [`Scope::Training`] pass at the
+    /// same values.
+    Complete(&'p [Tangents]),
 }
 
 /// One linearised fit of the friction with the calibration parameters about `theta` (the
@@ -154,9 +157,7 @@ enum Scope {
 /// friction the columns of the limits are their derivatives at zero (the pre-sliding travel
 /// has none there, and keeps its value); elsewhere the derivatives of the whole path at
 /// `theta` (the tangent pass), the joints' pre-sliding travel among them while the joints rub.
-/// `scope` says which series its tangent pass runs on; `reuse`, a pass at `theta` already
-/// made, whose series are taken as they are (the others run).
-#[allow(clippy::too_many_arguments)]
+/// `scope` says which series its tangent pass runs on.
 fn step_at(
     ctx: &Context,
     train: &[usize],
@@ -165,7 +166,6 @@ fn step_at(
     theta: Theta,
     held: [bool; 3],
     scope: Scope,
-    reuse: Option<&[Tangents]>,
 ) -> Option<Step> {
     let n = ctx.rows.len();
     let rubs = theta[0] != 0.0 || theta[1] != 0.0;
@@ -212,39 +212,38 @@ fn step_at(
     } else {
         // The deflection at `theta` and its derivatives, in one pass along each series.
         let f = Rubbing::from_effect(&with_values(entry, theta));
-        let per = if scope == Scope::All && reuse.is_none() {
-            ctx.friction_tangents(&f, || {
+        let mut trained = vec![false; ctx.series.len()];
+        for &i in train {
+            trained[ctx.rows[i].s] = true;
+        }
+        let per = match scope {
+            Scope::All => ctx.friction_tangents(&f, || {
                 ctx.paths()
                     .par_iter()
                     .map(|(rigid, kappa)| ctx.model.friction_path_tangent(rigid, kappa, &f))
                     .collect()
-            })
-        } else {
-            let mut wanted = vec![scope == Scope::All; ctx.series.len()];
-            for &i in train {
-                wanted[ctx.rows[i].s] = true;
-            }
-            std::sync::Arc::new(
+            }),
+            _ => std::sync::Arc::new(
                 ctx.paths()
                     .par_iter()
                     .enumerate()
-                    .map(|(s, (rigid, kappa))| {
-                        match reuse.and_then(|r| r.get(s)).filter(|t| !t.is_empty()) {
-                            Some(t) => t.clone(),
-                            None if wanted[s] => ctx.model.friction_path_tangent(rigid, kappa, &f),
-                            None => Vec::new(),
-                        }
+                    .map(|(s, (rigid, kappa))| match scope {
+                        Scope::Complete(done) if trained[s] => done[s].clone(),
+                        Scope::Training if !trained[s] => Vec::new(),
+                        _ => ctx.model.friction_path_tangent(rigid, kappa, &f),
                     })
                     .collect(),
-            )
+            ),
         };
+        if matches!(scope, Scope::Training) && trained.contains(&false) {
+            pass = Some(per.clone());
+        }
         let w = |d: [f64; 3]| [d[0], d[1], ctx.w_phi * d[2]];
         let at_theta: Vec<Option<DeflectionTangent>> = ctx
             .rows
             .iter()
             .map(|r| per[r.s].get(r.k).copied().flatten())
             .collect();
-        pass = Some(per.clone());
         let offset = (0..n)
             .map(|i| diff(at_theta[i].map(|(d, _)| w(d)), at[i]))
             .collect();
@@ -276,7 +275,7 @@ fn step_at(
         fit,
         x,
         sd,
-        per: pass,
+        partial: pass,
     })
 }
 
@@ -315,7 +314,7 @@ fn fit_from(
     } else {
         Scope::All
     };
-    let mut step = step_at(ctx, train, &entry, &at, theta, bound, scope, None)?;
+    let mut step = step_at(ctx, train, &entry, &at, theta, bound, scope)?;
     // The training error the calibration parameters alone leave (what a friction's step must
     // improve on).
     let sse0 = || {
@@ -330,7 +329,7 @@ fn fit_from(
             if bound[0] && bound[1] {
                 return None;
             }
-            step = step_at(ctx, train, &entry, &at, theta, bound, scope, None)?;
+            step = step_at(ctx, train, &entry, &at, theta, bound, scope)?;
             continue;
         }
         if left == 0 {
@@ -350,9 +349,9 @@ fn fit_from(
             break;
         }
         theta = next;
-        step = step_at(ctx, train, &entry, &at, theta, bound, scope, None)?;
+        step = step_at(ctx, train, &entry, &at, theta, bound, scope)?;
     }
-    if let Some(per) = step.per.clone().filter(|p| p.iter().any(Vec::is_empty)) {
+    if let Some(done) = step.partial.take() {
         step = step_at(
             ctx,
             train,
@@ -360,8 +359,7 @@ fn fit_from(
             &at,
             theta,
             bound,
-            Scope::All,
-            Some(&per),
+            Scope::Complete(&done),
         )?;
     }
     let Step { fit, x, sd, .. } = step;
