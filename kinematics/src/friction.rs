@@ -164,9 +164,13 @@ impl Default for FrictionTangent {
 impl FrictionTangent {
     /// One row: the equilibrium `d` of `sl` with the anchors `a` (before they follow), its
     /// derivatives, and those of the anchors after the row.
-    fn advance(&mut self, f: &Friction, sl: &SmallLoads, a: &VE, d: &VD) {
-        let x = sl.x0 + sl.t * d;
-        let (_, tan) = element_laws(f, &x, a);
+    fn advance(&mut self, f: &Friction, sl: &SmallLoads, a: &VE, d: &VD, laws: AtEquilibrium) {
+        // The elements' coordinates and tangent at `d`, as the equilibrium's iteration left
+        // them where it evaluated them there.
+        let (x, tan) = laws.unwrap_or_else(|| {
+            let x = sl.x0 + sl.t * d;
+            (x, element_laws(f, &x, a).1)
+        });
         // dL/dtheta at fixed coordinates and anchors, and the elements' stiffness times the
         // anchors' derivatives (L depends on x - a: dL/da = D).
         let mut rhs = SMatrix::<f64, ELEMENTS, 3>::zeros();
@@ -392,16 +396,31 @@ impl Robot {
         pose: &Pose,
         kappa: &[f64; 3],
         dm: &[[f64; 2]; 3],
+        each: impl FnMut(usize, [f64; 2], [f64; 2]),
+    ) -> VE {
+        self.coordinates_of(pose, kappa, dm, true, each)
+    }
+
+    /// [`Robot::coordinates`], the joints' angles (the first six) left at zero without
+    /// `angles`: what a structure needs of a configuration is the joints' places.
+    fn coordinates_of(
+        &self,
+        pose: &Pose,
+        kappa: &[f64; 3],
+        dm: &[[f64; 2]; 3],
+        angles: bool,
         mut each: impl FnMut(usize, [f64; 2], [f64; 2]),
     ) -> VE {
         let mut x0 = VE::zeros();
         for i in 0..3 {
             let m = g::add(self.joint_m(i, kappa[i]), dm[i]);
             let p = self.joint_p(i, pose);
-            let t = self.legs[i].tangent(kappa[i]);
-            let pe = g::sub(p, [pose.x, pose.y]);
-            x0[i] = g::signed_angle(t, g::sub(p, m));
-            x0[3 + i] = g::signed_angle(pe, g::sub(m, p));
+            if angles {
+                let t = self.legs[i].tangent(kappa[i]);
+                let pe = g::sub(p, [pose.x, pose.y]);
+                x0[i] = g::signed_angle(t, g::sub(p, m));
+                x0[3 + i] = g::signed_angle(pe, g::sub(m, p));
+            }
             x0[6 + 2 * i] = m[0];
             x0[7 + 2 * i] = m[1];
             x0[12 + 2 * i] = p[0];
@@ -421,12 +440,44 @@ impl Robot {
         dm: &[[f64; 2]; 3],
         k: &MD,
     ) -> Option<SmallLoads> {
+        let mut sl = SmallLoads {
+            x0: VE::zeros(),
+            t: MT::zeros(),
+            h: SMatrix::zeros(),
+            k: *k,
+        };
+        self.small_loads_into(
+            pose,
+            kappa,
+            dm,
+            Some(&mut sl.x0),
+            &mut sl.h,
+            Some(&mut sl.t),
+        )
+        .then_some(sl)
+    }
+
+    /// The parts of [`Robot::small_loads_displaced`] asked for, written in place: the elements'
+    /// coordinates `x0` (when given), the pose's change per tip displacement `h`, and `t` (when
+    /// given); false at a singular configuration (`h` and `t` then as they were).
+    fn small_loads_into(
+        &self,
+        pose: &Pose,
+        kappa: &[f64; 3],
+        dm: &[[f64; 2]; 3],
+        x0_out: Option<&mut VE>,
+        h: &mut SMatrix<f64, 3, DOF>,
+        t_out: Option<&mut MT>,
+    ) -> bool {
         let mut u = [[0.0; 2]; 3];
         let mut r = [[0.0; 2]; 3];
-        let x0 = self.coordinates(pose, kappa, dm, |i, m, p| {
+        let x0 = self.coordinates_of(pose, kappa, dm, x0_out.is_some(), |i, m, p| {
             u[i] = g::scale(1.0 / self.legs[i].l_st, g::sub(p, m));
             r[i] = g::sub(p, [pose.x, pose.y]);
         });
+        if let Some(out) = x0_out {
+            *out = x0;
+        }
         // The rigid links keep their lengths: u_i . (dP_i - d_i) = 0 with dP_i = dp + dphi
         // R(90) r_i, the rows (u_i, r_i x u_i).
         let w = nalgebra::Matrix3::from_fn(|i, c| match c {
@@ -434,15 +485,18 @@ impl Robot {
             1 => u[i][1],
             _ => g::cross(r[i], u[i]),
         });
-        let wi = w.try_inverse()?;
-        let mut h = SMatrix::<f64, 3, DOF>::zeros();
+        let Some(wi) = w.try_inverse() else {
+            return false;
+        };
         for i in 0..3 {
             for c in 0..3 {
                 h[(c, 2 * i)] = wi[(c, i)] * u[i][0];
                 h[(c, 2 * i + 1)] = wi[(c, i)] * u[i][1];
             }
         }
-        let mut t = MT::zeros();
+        let Some(t) = t_out else {
+            return true;
+        };
         for i in 0..3 {
             let n = g::perp(u[i]);
             let pr = g::perp(r[i]);
@@ -467,7 +521,7 @@ impl Robot {
                 t[(13 + 2 * i, col)] = dp[1];
             }
         }
-        Some(SmallLoads { x0, t, h, k: *k })
+        true
     }
 
     /// One row of a path through friction: the rigid pose `pose` of the curvatures `kappa`,
@@ -503,11 +557,15 @@ impl Robot {
         let stiffness = self
             .tip_stiffness(kappa, f.ei)
             .ok_or(FrictionError::Singular)?;
-        let sl = self
-            .small_loads_displaced(pose, kappa, &[[0.0; 2]; 3], &stiffness)
-            .ok_or(FrictionError::Singular)?;
+        // The structure is built in place (it is a kilobyte and a half): first the rigid
+        // configuration's coordinates and pose change, then the midpoint's structure.
+        let mut x0 = VE::zeros();
+        let mut h0 = SMatrix::<f64, 3, DOF>::zeros();
+        if !self.small_loads_into(pose, kappa, &[[0.0; 2]; 3], Some(&mut x0), &mut h0, None) {
+            return Err(FrictionError::Singular);
+        }
         let (Some(anchors), false) = (state.anchors, f.is_off()) else {
-            state.anchors = Some(sl.x0.into());
+            state.anchors = Some(x0.into());
             state.d = [0.0; DOF];
             state.last = Some((here, *kappa, [0.0; 3]));
             if let Some(tan) = tangent {
@@ -526,18 +584,33 @@ impl Robot {
         // forces, their tangent compliance at half the tip forces, changed nothing measurable
         // either, at twice the cost.)
         let d0 = VD::from(state.d);
-        let p0 = sl.h * d0;
+        let p0 = h0 * d0;
         let half = Pose::new(
             pose.x + 0.5 * p0[0],
             pose.y + 0.5 * p0[1],
             pose.phi + 0.5 * p0[2],
         );
         let dm: [[f64; 2]; 3] = std::array::from_fn(|i| [0.5 * d0[2 * i], 0.5 * d0[2 * i + 1]]);
-        let sl = match self.small_loads_displaced(&half, kappa, &dm, &stiffness) {
-            Some(mid) => SmallLoads { x0: sl.x0, ..mid },
-            None => sl,
-        };
-        state.held = Some(sl);
+        let held = state.held.get_or_insert_with(|| SmallLoads {
+            x0: VE::zeros(),
+            t: MT::zeros(),
+            h: SMatrix::zeros(),
+            k: MD::zeros(),
+        });
+        held.x0 = x0;
+        held.k = stiffness;
+        if !self.small_loads_into(&half, kappa, &dm, None, &mut held.h, Some(&mut held.t)) {
+            // The rigid configuration's structure where the midpoint's is singular.
+            held.h = h0;
+            self.small_loads_into(
+                pose,
+                kappa,
+                &[[0.0; 2]; 3],
+                None,
+                &mut held.h,
+                Some(&mut held.t),
+            );
+        }
         settle(f, &a, here, *kappa, state, tangent)
     }
 
@@ -690,7 +763,7 @@ fn settle(
             start += VD::from(g) * dk;
         }
     }
-    let d = equilibrium(f, sl, a, start, QUADRATIC)?;
+    let (d, laws) = equilibrium_and_laws(f, sl, a, start, QUADRATIC)?;
     if let Some(dk) = change {
         let mut moved = (0..3).filter(|&l| dk[l] != 0.0);
         if let (Some(l), None) = (moved.next(), moved.next()) {
@@ -698,7 +771,7 @@ fn settle(
         }
     }
     if let Some(tan) = tangent {
-        tan.advance(f, sl, a, &d);
+        tan.advance(f, sl, a, &d, laws);
     }
     // The elements that slipped take their anchors along.
     let next = slipped(f, &(sl.x0 + sl.t * d), a);
@@ -757,57 +830,97 @@ const QUADRATIC: f64 = 5e-5;
 /// start's is taken (the line search's own stop, the strong Wolfe condition), and one below
 /// `quadratic` that keeps the elements' pattern ends the iteration ([`QUADRATIC`]; 0: run to
 /// rounding).
+#[cfg(test)]
 fn equilibrium(
+    f: &Friction,
+    sl: &SmallLoads,
+    a: &VE,
+    d: VD,
+    quadratic: f64,
+) -> Result<VD, FrictionError> {
+    equilibrium_and_laws(f, sl, a, d, quadratic).map(|(d, _)| d)
+}
+
+/// The elements' coordinates at an equilibrium and their tangent there, where the iteration
+/// evaluated them ([`equilibrium_and_laws`]).
+type AtEquilibrium = Option<(VE, Tangent)>;
+
+/// [`equilibrium`] with the elements' coordinates and tangent at the answer where the
+/// iteration ended on an evaluation there (what [`FrictionTangent::advance`] takes up).
+fn equilibrium_and_laws(
     f: &Friction,
     sl: &SmallLoads,
     a: &VE,
     mut d: VD,
     quadratic: f64,
-) -> Result<VD, FrictionError> {
-    let gradient = |d: &VD| -> (VD, Tangent) {
-        let x = sl.x0 + sl.t * d;
-        let (l, tan) = element_laws(f, &x, a);
-        // k d - t^T L.
-        (sl.k * d - sl.t.tr_mul(&l), tan)
+) -> Result<(VD, AtEquilibrium), FrictionError> {
+    // The gradient and the elements' tangent at d (k d - t^T L), written in place: two of each
+    // are kept, the current iterate's and the trial's (they were moved from one to the other,
+    // a fifth of a kilobyte each time).
+    let gradient = |d: &VD, g: &mut VD, tan: &mut Tangent, x: &mut VE| {
+        *x = sl.x0 + sl.t * d;
+        let mut l = VE::zeros();
+        element_laws_into(f, x, a, &mut l, tan);
+        *g = sl.k * d - sl.t.tr_mul(&l);
     };
-    let (mut grad, mut dl) = gradient(&d);
+    let mut grads = [VD::zeros(); 2];
+    let mut tans = [Tangent::ZERO; 2];
+    let mut xs = [VE::zeros(); 2];
+    let mut cur = 0;
+    gradient(&d, &mut grads[0], &mut tans[0], &mut xs[0]);
     for _ in 0..ITERATIONS {
-        let hess = hessian(sl, &dl);
+        let hess = hessian(sl, &tans[cur]);
         let Some(ch) = Chol6::new(&hess) else {
             break;
         };
-        let step = -ch.solve(&grad);
+        let step = -ch.solve(&grads[cur]);
         // The full step says how far the solution is.
         if step.amax() < 1e-8 {
-            return Ok(d + step);
+            return Ok((d + step, None));
         }
         // The slope along the step at s: negative at 0, increasing (convexity). The whole step
         // where the slope is still not positive at its end; otherwise the slope's zero by
         // regula falsi (Illinois) on [0, 1].
-        let slope0 = grad.dot(&step);
-        let (g1, dl1) = gradient(&(d + step));
+        let slope0 = grads[cur].dot(&step);
+        let trial = 1 - cur;
+        let (g1, dl1, x1) = {
+            let [g0, g1] = &mut grads;
+            let [t0, t1] = &mut tans;
+            let [x0, x1] = &mut xs;
+            if trial == 1 {
+                (g1, t1, x1)
+            } else {
+                (g0, t0, x0)
+            }
+        };
+        gradient(&(d + step), g1, dl1, x1);
         let slope1 = g1.dot(&step);
         if slope1 <= 0.1 * slope0.abs() || !slope0.is_finite() {
             d += step;
-            if step.amax() < quadratic && dl1.stuck == dl.stuck {
-                return Ok(d);
+            if step.amax() < quadratic && tans[trial].stuck == tans[cur].stuck {
+                return Ok((d, Some((xs[trial], tans[trial]))));
             }
-            (grad, dl) = (g1, dl1);
+            cur = trial;
             // The tips' forces balance to a nanonewton: within 1e-8 mm of the solution for
             // segments of 0.1 N/mm and more.
-            if grad.amax() < 1e-9 {
-                return Ok(d);
+            if grads[cur].amax() < 1e-9 {
+                return Ok((d, Some((xs[cur], tans[cur]))));
             }
             continue;
         }
         let (mut lo, mut flo, mut hi, mut fhi) = (0.0, slope0, 1.0, slope1);
         let mut side = 0;
-        let mut best = (0.5, None);
+        let mut best = 0.5;
         for _ in 0..12 {
             let s = (lo * fhi - hi * flo) / (fhi - flo);
-            let (gs, dls) = gradient(&(d + step * s));
-            let fs = gs.dot(&step);
-            best = (s, Some((gs, dls)));
+            gradient(
+                &(d + step * s),
+                &mut grads[trial],
+                &mut tans[trial],
+                &mut xs[trial],
+            );
+            let fs = grads[trial].dot(&step);
+            best = s;
             if fs.abs() <= 0.1 * slope0.abs() {
                 break;
             }
@@ -825,9 +938,9 @@ fn equilibrium(
                 side = 1;
             }
         }
-        let (s, gd) = best;
-        d += step * s;
-        (grad, dl) = gd.unwrap_or_else(|| gradient(&d));
+        // The trial's gradient is the last point the line search took.
+        d += step * best;
+        cur = trial;
     }
     Err(FrictionError::NoConvergence)
 }
@@ -842,14 +955,26 @@ struct Tangent {
     stuck: u32,
 }
 
-/// The elements' loads for their coordinates `x` and anchors `a`, and their tangent stiffness.
-fn element_laws(f: &Friction, x: &VE, a: &VE) -> (VE, Tangent) {
-    let mut l = VE::zeros();
-    let mut t = Tangent {
+impl Tangent {
+    /// Every element free (no stiffness).
+    const ZERO: Tangent = Tangent {
         joints: [0.0; 6],
         supports: [[0.0; 3]; 6],
         stuck: 0,
     };
+}
+
+/// The elements' loads for their coordinates `x` and anchors `a`, and their tangent stiffness.
+fn element_laws(f: &Friction, x: &VE, a: &VE) -> (VE, Tangent) {
+    let mut l = VE::zeros();
+    let mut t = Tangent::ZERO;
+    element_laws_into(f, x, a, &mut l, &mut t);
+    (l, t)
+}
+
+/// [`element_laws`] written into `l` (zero on entry) and `t` (reset here).
+fn element_laws_into(f: &Friction, x: &VE, a: &VE, l: &mut VE, t: &mut Tangent) {
+    *t = Tangent::ZERO;
     let (tj, fs) = (f.joint_torque, f.support_force);
     if tj > 0.0 {
         let kj = tj / f.joint_presliding;
@@ -889,7 +1014,6 @@ fn element_laws(f: &Friction, x: &VE, a: &VE) -> (VE, Tangent) {
             }
         }
     }
-    (l, t)
 }
 
 /// The Hessian of the potential energy: `k + t^T D t`, D the elements' tangent stiffness

@@ -72,7 +72,7 @@ pub struct Context<'a> {
 pub type Tangents = Vec<Option<crate::model::DeflectionTangent>>;
 
 /// The rigid pose (if any) and the curvatures of every row of one series.
-pub type Path = (crate::model::RigidPath, Vec<[f64; 3]>);
+pub type Path = (std::sync::Arc<crate::model::RigidPath>, Vec<[f64; 3]>);
 
 /// The load responses of every row and how they were interpolated (`None`: every row solved,
 /// the exact model).

@@ -205,6 +205,218 @@ pub type DeflectionTangent = ([f64; 3], [[f64; 3]; 3]);
 /// A row's friction deflection and the displacement of the joints M_i (base frame, mm).
 pub type DeflectionAndJoints = ([f64; 3], [[f64; 2]; 3]);
 
+/// One row of a friction pass: the deflection (x mm, y mm, phi rad), its derivatives by the
+/// friction's fitted values (zero in a pass made without them), and the displacement of the
+/// joints M_i (base frame, mm).
+#[derive(Debug, Clone, Copy)]
+struct PassRow {
+    d: [f64; 3],
+    t: [[f64; 3]; 3],
+    joints: [[f64; 2]; 3],
+}
+
+/// The friction passes made last, each with what it was made for, so that a pass asked for
+/// again is not made again: a pass runs the friction's history through every configuration of
+/// a series (a tenth to a fifth of a second on 44k rows), and the search asks for the same one
+/// from different places (the prediction of a model, then the refinement that starts from it
+/// and linearises its friction; the calibration from the drawing reading the joints of the
+/// pass the prediction made). A pass is the same when the legs, the path (every rigid pose and
+/// curvature, the stairs' too, to the bit) and the friction are: its answer is then the same
+/// to the bit. A pass with the derivatives answers one asked without them.
+mod kept {
+    use super::{PassRow, RigidPath};
+    use pcr_kinematics::friction::Friction;
+    use pcr_robot::{LegConfig, RobotConfig, WorkingMode};
+    use std::sync::{Arc, Mutex};
+
+    /// Passes kept (each series of a model is one): a model's calibration recording and its
+    /// held-out one, for the last three models.
+    const KEPT: usize = 6;
+
+    struct Kept {
+        legs: Vec<LegConfig>,
+        mode: [WorkingMode; 3],
+        f: Friction,
+        tangent: bool,
+        rigid: RigidPath,
+        kappa: Vec<[f64; 3]>,
+        rows: Arc<Vec<Option<PassRow>>>,
+    }
+
+    /// The kept passes, the one used last at the end.
+    static PASSES: Mutex<Vec<Kept>> = Mutex::new(Vec::new());
+
+    /// A rigid path made ([`super::ExtendedModel::rigid_path`]) with what it was made of: the
+    /// legs, the curvatures, the effective motor positions (the stairs' steps) and the
+    /// measured poses (the kinematics' warm starts).
+    struct KeptRigid {
+        legs: Vec<LegConfig>,
+        mode: [WorkingMode; 3],
+        limits: pcr_robot::Limits,
+        kappa: Vec<[f64; 3]>,
+        q_eff: Vec<[f64; 3]>,
+        measured: Vec<Option<[f64; 3]>>,
+        path: Arc<RigidPath>,
+    }
+
+    /// The rigid paths kept, the one used last at the end (a model's two series, for the last
+    /// three models).
+    static RIGID: Mutex<Vec<KeptRigid>> = Mutex::new(Vec::new());
+
+    fn same_rows(a: &[[f64; 3]], b: &[[f64; 3]]) -> bool {
+        a.len() == b.len() && a.iter().zip(b).all(|(x, y)| bits(x) == bits(y))
+    }
+
+    fn same_measured(k: &KeptRigid, s: &crate::series::Series) -> bool {
+        k.measured.len() == s.samples.len()
+            && k.measured
+                .iter()
+                .zip(&s.samples)
+                .all(|(m, x)| match (m, &x.pose) {
+                    (Some(m), Some(p)) => bits(m) == bits(p),
+                    (None, None) => true,
+                    _ => false,
+                })
+    }
+
+    /// The kept rigid path of `config`'s legs for the series `s` at `kappa` and `q_eff`.
+    pub(super) fn find_rigid(
+        config: &RobotConfig,
+        s: &crate::series::Series,
+        kappa: &[[f64; 3]],
+        q_eff: &[[f64; 3]],
+    ) -> Option<Arc<RigidPath>> {
+        let mut kept = RIGID.lock().unwrap_or_else(|e| e.into_inner());
+        let i = kept.iter().position(|k| {
+            same_rows(&k.kappa, kappa)
+                && same_rows(&k.q_eff, q_eff)
+                && k.mode == config.working_mode
+                && k.legs == config.legs
+                && k.limits == config.limits
+                && same_measured(k, s)
+        })?;
+        let k = kept.remove(i);
+        let path = k.path.clone();
+        kept.push(k);
+        Some(path)
+    }
+
+    /// Keeps a rigid path made ([`find_rigid`]'s arguments).
+    pub(super) fn keep_rigid(
+        config: &RobotConfig,
+        s: &crate::series::Series,
+        kappa: &[[f64; 3]],
+        q_eff: &[[f64; 3]],
+        path: Arc<RigidPath>,
+    ) {
+        let mut kept = RIGID.lock().unwrap_or_else(|e| e.into_inner());
+        if kept.len() >= KEPT {
+            kept.remove(0);
+        }
+        kept.push(KeptRigid {
+            legs: config.legs.clone(),
+            mode: config.working_mode,
+            limits: config.limits.clone(),
+            kappa: kappa.to_vec(),
+            q_eff: q_eff.to_vec(),
+            measured: s.samples.iter().map(|x| x.pose).collect(),
+            path,
+        });
+    }
+
+    fn bits(v: &[f64; 3]) -> [u64; 3] {
+        v.map(f64::to_bits)
+    }
+
+    fn same_pose(a: &pcr_kinematics::Pose, b: &pcr_kinematics::Pose) -> bool {
+        bits(&[a.x, a.y, a.phi]) == bits(&[b.x, b.y, b.phi])
+    }
+
+    fn same_path(a: &RigidPath, b: &RigidPath, ka: &[[f64; 3]], kb: &[[f64; 3]]) -> bool {
+        ka.len() == kb.len()
+            && a.poses.len() == b.poses.len()
+            && a.stairs.len() == b.stairs.len()
+            && ka.iter().zip(kb).all(|(x, y)| bits(x) == bits(y))
+            && a.poses.iter().zip(&b.poses).all(|(p, q)| match (p, q) {
+                (Some(p), Some(q)) => same_pose(p, q),
+                (None, None) => true,
+                _ => false,
+            })
+            && a.stairs.iter().zip(&b.stairs).all(|(s, t)| {
+                s.len() == t.len()
+                    && s.iter()
+                        .zip(t)
+                        .all(|((p, k), (q, l))| same_pose(p, q) && bits(k) == bits(l))
+            })
+    }
+
+    fn same_friction(a: &Friction, b: &Friction) -> bool {
+        [
+            a.joint_torque,
+            a.joint_presliding,
+            a.support_force,
+            a.support_presliding,
+            a.ei,
+        ]
+        .map(f64::to_bits)
+            == [
+                b.joint_torque,
+                b.joint_presliding,
+                b.support_force,
+                b.support_presliding,
+                b.ei,
+            ]
+            .map(f64::to_bits)
+    }
+
+    /// The kept pass of `config`'s legs along `rigid` with `f` (one with the derivatives where
+    /// `tangent`).
+    pub(super) fn find(
+        config: &RobotConfig,
+        rigid: &RigidPath,
+        kappa: &[[f64; 3]],
+        f: &Friction,
+        tangent: bool,
+    ) -> Option<Arc<Vec<Option<PassRow>>>> {
+        let mut kept = PASSES.lock().unwrap_or_else(|e| e.into_inner());
+        let i = kept.iter().position(|k| {
+            (k.tangent || !tangent)
+                && same_friction(&k.f, f)
+                && k.mode == config.working_mode
+                && k.legs == config.legs
+                && same_path(&k.rigid, rigid, &k.kappa, kappa)
+        })?;
+        let k = kept.remove(i);
+        let rows = k.rows.clone();
+        kept.push(k);
+        Some(rows)
+    }
+
+    /// Keeps a pass made ([`find`]'s arguments), in place of the one used longest ago.
+    pub(super) fn keep(
+        config: &RobotConfig,
+        rigid: &RigidPath,
+        kappa: &[[f64; 3]],
+        f: &Friction,
+        tangent: bool,
+        rows: Arc<Vec<Option<PassRow>>>,
+    ) {
+        let mut kept = PASSES.lock().unwrap_or_else(|e| e.into_inner());
+        if kept.len() >= KEPT {
+            kept.remove(0);
+        }
+        kept.push(Kept {
+            legs: config.legs.clone(),
+            mode: config.working_mode,
+            f: *f,
+            tangent,
+            rigid: rigid.clone(),
+            kappa: kappa.to_vec(),
+            rows,
+        });
+    }
+}
+
 /// The model of one robot file.
 #[derive(Debug, Clone)]
 pub struct ExtendedModel {
@@ -345,7 +557,12 @@ impl ExtendedModel {
     /// The rigid pose of every row of a series for the curvatures `kappa` (one per row),
     /// warm-started from row to row and from the measured poses; `None` where the kinematics do
     /// not close.
-    pub fn rigid_path(&self, s: &Series, kappa: &[[f64; 3]]) -> RigidPath {
+    pub fn rigid_path(&self, s: &Series, kappa: &[[f64; 3]]) -> std::sync::Arc<RigidPath> {
+        let q_eff = self.effective_steps(s, &self.config.effects);
+        if let Some(p) = kept::find_rigid(&self.config, s, kappa, &q_eff) {
+            tracing::debug!(rows = kappa.len(), "rigid path kept");
+            return p;
+        }
         let mut guess = start_guess(s, 0);
         let mut last: Option<([f64; 3], Pose)> = None;
         let poses: Vec<Option<Pose>> = kappa
@@ -364,7 +581,6 @@ impl ExtendedModel {
                 Some(p)
             })
             .collect();
-        let q_eff = self.effective_steps(s, &self.config.effects);
         let stairs = (0..poses.len())
             .map(|k| {
                 let (Some(prev), Some(_)) = (k.checked_sub(1).and_then(|j| poses[j]), poses[k])
@@ -374,7 +590,9 @@ impl ExtendedModel {
                 self.stair(&prev, &kappa[k - 1], &kappa[k], &q_eff[k - 1], &q_eff[k])
             })
             .collect();
-        RigidPath { poses, stairs }
+        let path = std::sync::Arc::new(RigidPath { poses, stairs });
+        kept::keep_rigid(&self.config, s, kappa, &q_eff, path.clone());
+        path
     }
 
     /// The configurations between two rows (pose `p0` at curvatures `k0` and motor positions
@@ -436,10 +654,8 @@ impl ExtendedModel {
         kappa: &[[f64; 3]],
         f: &Friction,
     ) -> Vec<Option<[f64; 3]>> {
-        along_path(rigid, kappa, |p, k, state, at| match at {
-            Passing::Row => self.robot.friction_step(f, p, k, state).ok(),
-            Passing::Between => self.robot.friction_pass(f, p, k, state, None).ok(),
-        })
+        let rows = self.kept_pass(rigid, kappa, f, false);
+        rows.iter().map(|r| r.map(|r| r.d)).collect()
     }
 
     /// [`ExtendedModel::friction_path`] with the derivatives of every row's deflection by the
@@ -452,17 +668,8 @@ impl ExtendedModel {
         kappa: &[[f64; 3]],
         f: &Friction,
     ) -> Vec<Option<DeflectionTangent>> {
-        let mut tangent = pcr_kinematics::friction::FrictionTangent::default();
-        along_path(rigid, kappa, |p, k, state, at| match at {
-            Passing::Row => self
-                .robot
-                .friction_step_tangent(f, p, k, state, &mut tangent)
-                .ok(),
-            Passing::Between => {
-                let _ = self.robot.friction_pass(f, p, k, state, Some(&mut tangent));
-                None
-            }
-        })
+        let rows = self.kept_pass(rigid, kappa, f, true);
+        rows.iter().map(|r| r.map(|r| (r.d, r.t))).collect()
     }
 
     /// [`ExtendedModel::friction_path`] with the displacement of the joints M_i at every row
@@ -473,13 +680,57 @@ impl ExtendedModel {
         kappa: &[[f64; 3]],
         f: &Friction,
     ) -> Vec<Option<DeflectionAndJoints>> {
-        along_path(rigid, kappa, |p, k, state, at| {
-            let d = match at {
-                Passing::Row => self.robot.friction_step(f, p, k, state).ok()?,
-                Passing::Between => self.robot.friction_pass(f, p, k, state, None).ok()?,
-            };
-            Some((d, state.joints()))
-        })
+        let rows = self.kept_pass(rigid, kappa, f, false);
+        rows.iter().map(|r| r.map(|r| (r.d, r.joints))).collect()
+    }
+
+    /// The friction's pass along `rigid` (with the derivatives when `tangent`), as one made
+    /// before for the same legs, path and friction left it ([`KEPT`]), or made now and kept.
+    fn kept_pass(
+        &self,
+        rigid: &RigidPath,
+        kappa: &[[f64; 3]],
+        f: &Friction,
+        tangent: bool,
+    ) -> std::sync::Arc<Vec<Option<PassRow>>> {
+        if let Some(rows) = kept::find(&self.config, rigid, kappa, f, tangent) {
+            tracing::debug!(rows = kappa.len(), tangent, "friction pass kept");
+            return rows;
+        }
+        let rows = std::sync::Arc::new(if tangent {
+            let mut tan = pcr_kinematics::friction::FrictionTangent::default();
+            along_path(rigid, kappa, |p, k, state, at| match at {
+                Passing::Row => {
+                    let (d, t) = self
+                        .robot
+                        .friction_step_tangent(f, p, k, state, &mut tan)
+                        .ok()?;
+                    Some(PassRow {
+                        d,
+                        t,
+                        joints: state.joints(),
+                    })
+                }
+                Passing::Between => {
+                    let _ = self.robot.friction_pass(f, p, k, state, Some(&mut tan));
+                    None
+                }
+            })
+        } else {
+            along_path(rigid, kappa, |p, k, state, at| {
+                let d = match at {
+                    Passing::Row => self.robot.friction_step(f, p, k, state).ok()?,
+                    Passing::Between => self.robot.friction_pass(f, p, k, state, None).ok()?,
+                };
+                Some(PassRow {
+                    d,
+                    t: [[0.0; 3]; 3],
+                    joints: state.joints(),
+                })
+            })
+        });
+        kept::keep(&self.config, rigid, kappa, f, tangent, rows.clone());
+        rows
     }
 
     /// The derivatives of every row's friction deflection with respect to the joints' and the

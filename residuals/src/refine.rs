@@ -202,11 +202,13 @@ impl FrozenFriction {
             .par_iter()
             .zip(rows)
             .map(|(s, rows)| {
-                // The history up to the last refined row (none: no pass).
-                let Some(&last) = rows.iter().max() else {
+                // The history along every row (none without a refined row: no pass), the
+                // pass a prediction of the model makes ([`ExtendedModel::friction_path`]: a
+                // model just predicted is not passed again).
+                if rows.is_empty() {
                     return Vec::new();
-                };
-                let all: Vec<usize> = (0..=last).collect();
+                }
+                let all: Vec<usize> = (0..s.samples.len()).collect();
                 let kappa = model.curvatures(s, &all);
                 let rigid = model.rigid_path(s, &kappa);
                 let path = model.friction_path_tangent(&rigid, &kappa, &f);
