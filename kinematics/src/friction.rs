@@ -770,11 +770,13 @@ fn settle(
             state.per_step[l][usize::from(dk[l] > 0.0)] = Some(((d - last) / dk[l]).into());
         }
     }
+    // The elements' coordinates at the answer (the iteration's own where it evaluated them).
+    let x = laws.as_ref().map_or_else(|| sl.x0 + sl.t * d, |(x, _)| *x);
     if let Some(tan) = tangent {
         tan.advance(f, sl, a, &d, laws);
     }
     // The elements that slipped take their anchors along.
-    let next = slipped(f, &(sl.x0 + sl.t * d), a);
+    let next = slipped(f, &x, a);
     let p = sl.h * d;
     let out = [p[0], p[1], p[2]];
     state.anchors = Some(next.into());
