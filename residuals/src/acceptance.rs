@@ -63,7 +63,9 @@ pub(crate) fn accept<'a>(
                 .validate("extended robot")
                 .ok()
                 .and_then(|_| ExtendedModel::like(&cand, &ctx.model).ok())
-                .map(|m| {
+                .map(|mut m| {
+                    // The step after this one, and the refinement, linearise its friction.
+                    m.friction_derivatives = true;
                     let least = n_train.saturating_sub(5);
                     Context::training(series, m, blocks, w_phi, ACCEPTANCE_EVERY, least)
                 })

@@ -210,13 +210,16 @@ pub fn attribute(
         .stage(0, "estimating the command delay", ctx0.rows.len(), 0);
     let timing = crate::alignment::align(&ctx0);
     let finding = crate::alignment::declaration_errors(&timing);
-    let mut a = match crate::alignment::realigned(series, &timing) {
-        None => attribute_from(ctx0, start, drawing, series, blocks, opts)?,
+    let a = match crate::alignment::realigned(series, &timing) {
+        None => attribute_from(ctx0, start, drawing, series, blocks, opts),
         Some(aligned) => {
             let ctx = Context::new(&aligned, model, blocks, w_phi);
-            attribute_from(ctx, start, drawing, &aligned, blocks, opts)?
+            attribute_from(ctx, start, drawing, &aligned, blocks, opts)
         }
     };
+    // The passes kept for this analysis are of no use to the next one.
+    crate::model::forget_kept();
+    let mut a = a?;
     a.timing = timing;
     a.timing_finding = finding;
     Ok(a)
@@ -1189,7 +1192,10 @@ fn from_drawing<'a>(
             return start;
         };
         let least = start.1.rows.len().saturating_sub(5);
-        let full = Context::at_least(set.series, judged.model, set.blocks, set.w_phi, least);
+        // The consistency check and the final estimate linearise its friction next.
+        let mut model = judged.model;
+        model.friction_derivatives = true;
+        let full = Context::at_least(set.series, model, set.blocks, set.w_phi, least);
         if full.rows.len() + 5 >= start.1.rows.len() {
             (config, full)
         } else {

@@ -205,6 +205,13 @@ pub type DeflectionTangent = ([f64; 3], [[f64; 3]; 3]);
 /// A row's friction deflection and the displacement of the joints M_i (base frame, mm).
 pub type DeflectionAndJoints = ([f64; 3], [[f64; 2]; 3]);
 
+/// Forgets the friction passes and rigid paths kept ([`ExtendedModel::friction_path`],
+/// [`ExtendedModel::rigid_path`]): at the end of an analysis, whose recordings the next one
+/// does not share (they hold some tens of megabytes).
+pub(crate) fn forget_kept() {
+    kept::forget();
+}
+
 /// One row of a friction pass: the deflection (x mm, y mm, phi rad), its derivatives by the
 /// friction's fitted values (zero in a pass made without them), and the displacement of the
 /// joints M_i (base frame, mm).
@@ -299,6 +306,12 @@ mod kept {
         let path = k.path.clone();
         kept.push(k);
         Some(path)
+    }
+
+    /// Forgets every kept pass and rigid path.
+    pub(super) fn forget() {
+        PASSES.lock().unwrap_or_else(|e| e.into_inner()).clear();
+        RIGID.lock().unwrap_or_else(|e| e.into_inner()).clear();
     }
 
     /// Keeps a rigid path made ([`find_rigid`]'s arguments).
@@ -436,6 +449,12 @@ pub struct ExtendedModel {
     /// whose predictions are differentiated by its parameters (the refinement's forward
     /// differences) solves every row: an interpolation's stretches depend on the parameters.
     pub interpolate: bool,
+    /// A prediction's friction pass made with its derivatives by the friction's values, over
+    /// every row of a series, and kept ([`kept`]): for a model whose friction is linearised
+    /// next (an acceptance's step, the refinement and the consistency check that follow a
+    /// search's iterate), which then takes the pass instead of making it again (a pass with
+    /// the derivatives costs about 1.4 of one without). Not carried by [`ExtendedModel::like`].
+    pub friction_derivatives: bool,
     /// The effects' parts of the prediction ([`crate::effects::chain`]).
     pub chain: Chain,
 }
@@ -460,6 +479,7 @@ impl ExtendedModel {
             config: config.clone(),
             exact: false,
             interpolate: true,
+            friction_derivatives: false,
             chain,
         })
     }
@@ -523,13 +543,23 @@ impl ExtendedModel {
         let last_wanted = (0..n).rev().find(|&k| want(k));
         if let (Some(f), Some(last)) = (&self.friction, last_wanted) {
             let started = std::time::Instant::now();
-            let kappa: Vec<[f64; 3]> = preds[..=last].iter().map(|p| p.kappa).collect();
+            // With the derivatives, the pass a linearisation makes: over every row.
+            let upto = if self.friction_derivatives {
+                n - 1
+            } else {
+                last
+            };
+            let kappa: Vec<[f64; 3]> = preds[..=upto].iter().map(|p| p.kappa).collect();
             let rigid = self.rigid_path(s, &kappa);
-            for (k, d) in self
-                .friction_path(&rigid, &kappa, f)
-                .into_iter()
-                .enumerate()
-            {
+            let path = if self.friction_derivatives {
+                self.friction_path_tangent(&rigid, &kappa, f)
+                    .into_iter()
+                    .map(|r| r.map(|(d, _)| d))
+                    .collect()
+            } else {
+                self.friction_path(&rigid, &kappa, f)
+            };
+            for (k, d) in path.into_iter().enumerate() {
                 let p = &mut preds[k];
                 match (p.pose.as_mut(), d) {
                     (Some(q), Some(d)) => {
