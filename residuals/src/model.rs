@@ -1387,6 +1387,59 @@ mod tests {
         assert!(moved > 100, "{moved} rows deflected by the friction");
     }
 
+    /// A friction pass given again from the kept ones ([`kept`]) is the pass made afresh, to the
+    /// bit; one without the derivatives does not answer one with them; another friction is
+    /// another pass; and a prediction made with the derivatives predicts what one without does.
+    #[test]
+    fn a_kept_friction_pass_is_the_pass_made_again() {
+        let mut cfg = RobotConfig::nominal();
+        cfg.effects.friction = Some(pcr_robot::effects::Friction {
+            joint_torque_n_mm: 6.0,
+            support_force_n: 0.12,
+            joint_presliding_rad: pcr_robot::effects::Friction::default_joint_presliding(),
+            support_presliding_mm: pcr_robot::effects::Friction::default_support_presliding(),
+            ei_n_mm2: pcr_robot::effects::Friction::default_ei(),
+        });
+        let s = swinging(&cfg, 300, 80.0, 1.1, 0.9);
+        let m = ExtendedModel::new(&cfg, crate::effects::chain()).unwrap();
+        let f = m.friction.unwrap();
+        let kappa: Vec<[f64; 3]> = m.predict(&s).iter().map(|p| p.kappa).collect();
+        let rigid = m.rigid_path(&s, &kappa);
+        assert_eq!(m.rigid_path(&s, &kappa).poses, rigid.poses);
+        forget_kept();
+        let plain = m.friction_path(&rigid, &kappa, &f);
+        // Asked for with the derivatives after a pass without them: made, with them.
+        let tangent = m.friction_path_tangent(&rigid, &kappa, &f);
+        let derivatives = tangent
+            .iter()
+            .flatten()
+            .filter(|(_, t)| t.iter().flatten().any(|v| *v != 0.0))
+            .count();
+        assert!(derivatives > 100, "{derivatives} rows with derivatives");
+        let deflections: Vec<Option<[f64; 3]>> =
+            tangent.iter().map(|r| r.map(|(d, _)| d)).collect();
+        assert_eq!(deflections, plain);
+        // Given again (kept, or made again when another test forgot it), the same to the bit.
+        assert_eq!(m.friction_path_tangent(&rigid, &kappa, &f), tangent);
+        assert_eq!(m.friction_path(&rigid, &kappa, &f), plain);
+        let joints = m.friction_path_with_joints(&rigid, &kappa, &f);
+        forget_kept();
+        assert_eq!(m.friction_path_with_joints(&rigid, &kappa, &f), joints);
+        assert_eq!(m.friction_path_tangent(&rigid, &kappa, &f), tangent);
+        // Another friction is another pass.
+        let stronger = Friction {
+            joint_torque: 2.0 * f.joint_torque,
+            ..f
+        };
+        assert_ne!(m.friction_path(&rigid, &kappa, &stronger), plain);
+        // A prediction with the derivatives is the prediction.
+        let mut with = m.clone();
+        with.friction_derivatives = true;
+        let a: Vec<_> = m.predict(&s).iter().map(|p| p.pose).collect();
+        let b: Vec<_> = with.predict(&s).iter().map(|p| p.pose).collect();
+        assert_eq!(a, b);
+    }
+
     /// A series of `n` rows 20 ms apart whose motors swing about home by `amplitude` steps
     /// (motor i at `rate` t + `phase` i rad), rounded to whole steps, each row with a measured
     /// pose.
