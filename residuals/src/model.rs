@@ -232,17 +232,73 @@ struct PassRow {
 /// to the bit. A pass with the derivatives answers one asked without them.
 mod kept {
     use super::{PassRow, RigidPath};
+    use crate::series::Series;
     use pcr_kinematics::friction::Friction;
-    use pcr_robot::{LegConfig, RobotConfig, WorkingMode};
+    use pcr_kinematics::Pose;
+    use pcr_robot::RobotConfig;
     use std::sync::{Arc, Mutex};
 
-    /// Passes kept (each series of a model is one): a model's calibration recording and its
-    /// held-out one, for the last three models.
+    /// Entries kept per list (each series of a model is one): a model's calibration recording
+    /// and its held-out one, for the last three models.
     const KEPT: usize = 6;
 
-    struct Kept {
-        legs: Vec<LegConfig>,
-        mode: [WorkingMode; 3],
+    /// A list of the entries made last, the one used last at the end.
+    struct Lru<T>(Mutex<Vec<T>>);
+
+    impl<T> Lru<T> {
+        const fn new() -> Self {
+            Lru(Mutex::new(Vec::new()))
+        }
+
+        fn list(&self) -> std::sync::MutexGuard<'_, Vec<T>> {
+            self.0.lock().unwrap_or_else(|e| e.into_inner())
+        }
+
+        /// What `get` gives of the first entry `is` accepts, that entry now the last used.
+        fn find<R>(&self, is: impl Fn(&T) -> bool, get: impl Fn(&T) -> R) -> Option<R> {
+            let mut list = self.list();
+            let i = list.iter().position(is)?;
+            let e = list.remove(i);
+            let out = get(&e);
+            list.push(e);
+            Some(out)
+        }
+
+        /// Keeps `e` in place of the entry used longest ago.
+        fn keep(&self, e: T) {
+            let mut list = self.list();
+            if list.len() >= KEPT {
+                list.remove(0);
+            }
+            list.push(e);
+        }
+    }
+
+    /// What a pass and a rigid path depend on of the robot file: its legs (the kinematics and
+    /// the structure).
+    #[derive(PartialEq)]
+    struct Legs {
+        legs: Vec<pcr_robot::LegConfig>,
+        mode: [pcr_robot::WorkingMode; 3],
+        limits: pcr_robot::Limits,
+    }
+
+    impl Legs {
+        fn of(c: &RobotConfig) -> Legs {
+            Legs {
+                legs: c.legs.clone(),
+                mode: c.working_mode,
+                limits: c.limits.clone(),
+            }
+        }
+
+        fn are(&self, c: &RobotConfig) -> bool {
+            self.legs == c.legs && self.mode == c.working_mode && self.limits == c.limits
+        }
+    }
+
+    struct Pass {
+        legs: Legs,
         f: Friction,
         tangent: bool,
         rigid: RigidPath,
@@ -250,111 +306,44 @@ mod kept {
         rows: Arc<Vec<Option<PassRow>>>,
     }
 
-    /// The kept passes, the one used last at the end.
-    static PASSES: Mutex<Vec<Kept>> = Mutex::new(Vec::new());
-
-    /// A rigid path made ([`super::ExtendedModel::rigid_path`]) with what it was made of: the
-    /// legs, the curvatures, the effective motor positions (the stairs' steps) and the
-    /// measured poses (the kinematics' warm starts).
-    struct KeptRigid {
-        legs: Vec<LegConfig>,
-        mode: [WorkingMode; 3],
-        limits: pcr_robot::Limits,
+    /// A rigid path ([`super::ExtendedModel::rigid_path`]) with what it was made of: the
+    /// curvatures, the effective motor positions (the stairs' steps) and the measured poses
+    /// (the kinematics' warm starts).
+    struct Rigid {
+        legs: Legs,
         kappa: Vec<[f64; 3]>,
         q_eff: Vec<[f64; 3]>,
         measured: Vec<Option<[f64; 3]>>,
         path: Arc<RigidPath>,
     }
 
-    /// The rigid paths kept, the one used last at the end (a model's two series, for the last
-    /// three models).
-    static RIGID: Mutex<Vec<KeptRigid>> = Mutex::new(Vec::new());
-
-    fn same_rows(a: &[[f64; 3]], b: &[[f64; 3]]) -> bool {
-        a.len() == b.len() && a.iter().zip(b).all(|(x, y)| bits(x) == bits(y))
-    }
-
-    fn same_measured(k: &KeptRigid, s: &crate::series::Series) -> bool {
-        k.measured.len() == s.samples.len()
-            && k.measured
-                .iter()
-                .zip(&s.samples)
-                .all(|(m, x)| match (m, &x.pose) {
-                    (Some(m), Some(p)) => bits(m) == bits(p),
-                    (None, None) => true,
-                    _ => false,
-                })
-    }
-
-    /// The kept rigid path of `config`'s legs for the series `s` at `kappa` and `q_eff`.
-    pub(super) fn find_rigid(
-        config: &RobotConfig,
-        s: &crate::series::Series,
-        kappa: &[[f64; 3]],
-        q_eff: &[[f64; 3]],
-    ) -> Option<Arc<RigidPath>> {
-        let mut kept = RIGID.lock().unwrap_or_else(|e| e.into_inner());
-        let i = kept.iter().position(|k| {
-            same_rows(&k.kappa, kappa)
-                && same_rows(&k.q_eff, q_eff)
-                && k.mode == config.working_mode
-                && k.legs == config.legs
-                && k.limits == config.limits
-                && same_measured(k, s)
-        })?;
-        let k = kept.remove(i);
-        let path = k.path.clone();
-        kept.push(k);
-        Some(path)
-    }
-
-    /// Forgets every kept pass and rigid path.
-    pub(super) fn forget() {
-        PASSES.lock().unwrap_or_else(|e| e.into_inner()).clear();
-        RIGID.lock().unwrap_or_else(|e| e.into_inner()).clear();
-    }
-
-    /// Keeps a rigid path made ([`find_rigid`]'s arguments).
-    pub(super) fn keep_rigid(
-        config: &RobotConfig,
-        s: &crate::series::Series,
-        kappa: &[[f64; 3]],
-        q_eff: &[[f64; 3]],
-        path: Arc<RigidPath>,
-    ) {
-        let mut kept = RIGID.lock().unwrap_or_else(|e| e.into_inner());
-        if kept.len() >= KEPT {
-            kept.remove(0);
-        }
-        kept.push(KeptRigid {
-            legs: config.legs.clone(),
-            mode: config.working_mode,
-            limits: config.limits.clone(),
-            kappa: kappa.to_vec(),
-            q_eff: q_eff.to_vec(),
-            measured: s.samples.iter().map(|x| x.pose).collect(),
-            path,
-        });
-    }
+    static PASSES: Lru<Pass> = Lru::new();
+    static RIGID: Lru<Rigid> = Lru::new();
 
     fn bits(v: &[f64; 3]) -> [u64; 3] {
         v.map(f64::to_bits)
     }
 
-    fn same_pose(a: &pcr_kinematics::Pose, b: &pcr_kinematics::Pose) -> bool {
+    fn same_rows(a: &[[f64; 3]], b: &[[f64; 3]]) -> bool {
+        a.len() == b.len() && a.iter().zip(b).all(|(x, y)| bits(x) == bits(y))
+    }
+
+    fn same_pose(a: &Pose, b: &Pose) -> bool {
         bits(&[a.x, a.y, a.phi]) == bits(&[b.x, b.y, b.phi])
     }
 
-    fn same_path(a: &RigidPath, b: &RigidPath, ka: &[[f64; 3]], kb: &[[f64; 3]]) -> bool {
-        ka.len() == kb.len()
-            && a.poses.len() == b.poses.len()
-            && a.stairs.len() == b.stairs.len()
-            && ka.iter().zip(kb).all(|(x, y)| bits(x) == bits(y))
-            && a.poses.iter().zip(&b.poses).all(|(p, q)| match (p, q) {
+    fn same_poses(a: &[Option<Pose>], b: &[Option<Pose>]) -> bool {
+        a.len() == b.len()
+            && a.iter().zip(b).all(|(p, q)| match (p, q) {
                 (Some(p), Some(q)) => same_pose(p, q),
                 (None, None) => true,
                 _ => false,
             })
+    }
+
+    fn same_path(a: &RigidPath, b: &RigidPath) -> bool {
+        same_poses(&a.poses, &b.poses)
+            && a.stairs.len() == b.stairs.len()
             && a.stairs.iter().zip(&b.stairs).all(|(s, t)| {
                 s.len() == t.len()
                     && s.iter()
@@ -364,22 +353,17 @@ mod kept {
     }
 
     fn same_friction(a: &Friction, b: &Friction) -> bool {
-        [
-            a.joint_torque,
-            a.joint_presliding,
-            a.support_force,
-            a.support_presliding,
-            a.ei,
-        ]
-        .map(f64::to_bits)
-            == [
-                b.joint_torque,
-                b.joint_presliding,
-                b.support_force,
-                b.support_presliding,
-                b.ei,
+        let v = |f: &Friction| {
+            [
+                f.joint_torque,
+                f.joint_presliding,
+                f.support_force,
+                f.support_presliding,
+                f.ei,
             ]
             .map(f64::to_bits)
+        };
+        v(a) == v(b)
     }
 
     /// The kept pass of `config`'s legs along `rigid` with `f` (one with the derivatives where
@@ -391,21 +375,19 @@ mod kept {
         f: &Friction,
         tangent: bool,
     ) -> Option<Arc<Vec<Option<PassRow>>>> {
-        let mut kept = PASSES.lock().unwrap_or_else(|e| e.into_inner());
-        let i = kept.iter().position(|k| {
-            (k.tangent || !tangent)
-                && same_friction(&k.f, f)
-                && k.mode == config.working_mode
-                && k.legs == config.legs
-                && same_path(&k.rigid, rigid, &k.kappa, kappa)
-        })?;
-        let k = kept.remove(i);
-        let rows = k.rows.clone();
-        kept.push(k);
-        Some(rows)
+        PASSES.find(
+            |k| {
+                (k.tangent || !tangent)
+                    && same_friction(&k.f, f)
+                    && k.legs.are(config)
+                    && same_rows(&k.kappa, kappa)
+                    && same_path(&k.rigid, rigid)
+            },
+            |k| k.rows.clone(),
+        )
     }
 
-    /// Keeps a pass made ([`find`]'s arguments), in place of the one used longest ago.
+    /// Keeps a pass made ([`find`]'s arguments).
     pub(super) fn keep(
         config: &RobotConfig,
         rigid: &RigidPath,
@@ -414,19 +396,67 @@ mod kept {
         tangent: bool,
         rows: Arc<Vec<Option<PassRow>>>,
     ) {
-        let mut kept = PASSES.lock().unwrap_or_else(|e| e.into_inner());
-        if kept.len() >= KEPT {
-            kept.remove(0);
-        }
-        kept.push(Kept {
-            legs: config.legs.clone(),
-            mode: config.working_mode,
+        PASSES.keep(Pass {
+            legs: Legs::of(config),
             f: *f,
             tangent,
             rigid: rigid.clone(),
             kappa: kappa.to_vec(),
             rows,
         });
+    }
+
+    fn measured(s: &Series) -> impl Iterator<Item = Option<[f64; 3]>> + '_ {
+        s.samples.iter().map(|x| x.pose)
+    }
+
+    /// The kept rigid path of `config`'s legs for the series `s` at `kappa` and `q_eff`.
+    pub(super) fn find_rigid(
+        config: &RobotConfig,
+        s: &Series,
+        kappa: &[[f64; 3]],
+        q_eff: &[[f64; 3]],
+    ) -> Option<Arc<RigidPath>> {
+        RIGID.find(
+            |k| {
+                same_rows(&k.kappa, kappa)
+                    && same_rows(&k.q_eff, q_eff)
+                    && k.legs.are(config)
+                    && k.measured.len() == s.samples.len()
+                    && k.measured
+                        .iter()
+                        .zip(measured(s))
+                        .all(|(a, b)| match (a, b) {
+                            (Some(a), Some(b)) => bits(a) == bits(&b),
+                            (None, None) => true,
+                            _ => false,
+                        })
+            },
+            |k| k.path.clone(),
+        )
+    }
+
+    /// Keeps a rigid path made ([`find_rigid`]'s arguments).
+    pub(super) fn keep_rigid(
+        config: &RobotConfig,
+        s: &Series,
+        kappa: &[[f64; 3]],
+        q_eff: &[[f64; 3]],
+        path: Arc<RigidPath>,
+    ) {
+        RIGID.keep(Rigid {
+            legs: Legs::of(config),
+            kappa: kappa.to_vec(),
+            q_eff: q_eff.to_vec(),
+            measured: measured(s).collect(),
+            path,
+        });
+    }
+
+    /// Forgets every kept pass and rigid path.
+    pub(super) fn forget() {
+        PASSES.list().clear();
+        RIGID.list().clear();
     }
 }
 
@@ -1340,11 +1370,8 @@ mod tests {
         }
     }
 
-    /// Under friction, a prediction of some rows runs the friction's history only to the last
-    /// of them: those rows are the whole prediction's, to the bit, and the rows after it are
-    /// not predicted.
-    #[test]
-    fn some_rows_under_friction_are_the_whole_prediction_at_them() {
+    /// The nominal robot with friction at three times the prototype's.
+    fn rubbing() -> RobotConfig {
         let mut cfg = RobotConfig::nominal();
         cfg.effects.friction = Some(pcr_robot::effects::Friction {
             joint_torque_n_mm: 6.0,
@@ -1353,6 +1380,15 @@ mod tests {
             support_presliding_mm: pcr_robot::effects::Friction::default_support_presliding(),
             ei_n_mm2: pcr_robot::effects::Friction::default_ei(),
         });
+        cfg
+    }
+
+    /// Under friction, a prediction of some rows runs the friction's history only to the last
+    /// of them: those rows are the whole prediction's, to the bit, and the rows after it are
+    /// not predicted.
+    #[test]
+    fn some_rows_under_friction_are_the_whole_prediction_at_them() {
+        let cfg = rubbing();
         let s = swinging(&cfg, 300, 80.0, 1.1, 0.9);
         let m = ExtendedModel::new(&cfg, crate::effects::chain()).unwrap();
         assert!(m.friction.is_some());
@@ -1392,14 +1428,7 @@ mod tests {
     /// another pass; and a prediction made with the derivatives predicts what one without does.
     #[test]
     fn a_kept_friction_pass_is_the_pass_made_again() {
-        let mut cfg = RobotConfig::nominal();
-        cfg.effects.friction = Some(pcr_robot::effects::Friction {
-            joint_torque_n_mm: 6.0,
-            support_force_n: 0.12,
-            joint_presliding_rad: pcr_robot::effects::Friction::default_joint_presliding(),
-            support_presliding_mm: pcr_robot::effects::Friction::default_support_presliding(),
-            ei_n_mm2: pcr_robot::effects::Friction::default_ei(),
-        });
+        let cfg = rubbing();
         let s = swinging(&cfg, 300, 80.0, 1.1, 0.9);
         let m = ExtendedModel::new(&cfg, crate::effects::chain()).unwrap();
         let f = m.friction.unwrap();
