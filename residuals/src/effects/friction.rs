@@ -45,6 +45,16 @@ const RELINEARISATIONS: usize = 4;
 const ONSET_GAIN: f64 = 0.1;
 const STEP_SHARE: f64 = 0.05;
 
+/// The re-linearisations of a fit end where one changes the training error by less than this
+/// share of it: from no friction the error settles by the second or third linearisation while
+/// the joints' pre-sliding travel, which the data tell poorly, still swings by more than
+/// [`STEP_SHARE`] (backlash + friction at 1x: 7281, 2385.6, 2385.3, 2388.1, 2387.8 over five
+/// linearisations, the travel 2.6, 0.65, 0.77, 0.87 mrad; joint springs + frame + backlash at
+/// 3x, no friction in the data: 121425, 106388, 106208, 106189, 106183), and the acceptance's
+/// steps and the joint refinement take the travel from there. Two passes with the derivatives
+/// fewer, 0.4-0.5 s of such an analysis.
+const SSE_SETTLED: f64 = 0.005;
+
 /// A limit's estimate must be this many standard errors above zero for the fit from no friction
 /// to be re-linearised (otherwise the data show no friction and the first step stands).
 const SIGNIFICANT: f64 = 3.0;
@@ -322,6 +332,7 @@ fn fit_from(
         fit_joint(ctx, &nui, train, 0, &|_, _| {}, None).map_or(ctx.sse(train, None), |f| f.0.sse)
     };
     let mut left = steps;
+    let mut last_sse: Option<f64> = None;
     loop {
         if let Some(j) = (0..2).find(|&j| !bound[j] && theta[j] + step.x[j] < 0.0) {
             bound[j] = true;
@@ -332,9 +343,12 @@ fn fit_from(
             step = step_at(ctx, train, &entry, &at, theta, bound, scope)?;
             continue;
         }
-        if left == 0 {
+        let sse = step.fit.0.sse;
+        tracing::debug!(?theta, x = ?step.x, sse, left, "friction step");
+        if left == 0 || last_sse.is_some_and(|p: f64| (p - sse).abs() <= SSE_SETTLED * p) {
             break;
         }
+        last_sse = Some(sse);
         left -= 1;
         let next = stepped(theta, step.x);
         let significant = (0..2).any(|j| step.sd[j].is_some_and(|s| step.x[j] > SIGNIFICANT * s));
