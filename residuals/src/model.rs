@@ -332,13 +332,27 @@ mod kept {
         bits(&[a.x, a.y, a.phi]) == bits(&[b.x, b.y, b.phi])
     }
 
+    /// Whether two lists of optional values (of one length) hold values at the same places,
+    /// and the same ones by `eq`.
+    fn same_each<A, B>(
+        a: impl Iterator<Item = Option<A>>,
+        b: impl Iterator<Item = Option<B>>,
+        eq: impl Fn(A, B) -> bool,
+    ) -> bool {
+        a.zip(b).all(|(p, q)| match (p, q) {
+            (Some(p), Some(q)) => eq(p, q),
+            (None, None) => true,
+            _ => false,
+        })
+    }
+
     fn same_poses(a: &[Option<Pose>], b: &[Option<Pose>]) -> bool {
         a.len() == b.len()
-            && a.iter().zip(b).all(|(p, q)| match (p, q) {
-                (Some(p), Some(q)) => same_pose(p, q),
-                (None, None) => true,
-                _ => false,
-            })
+            && same_each(
+                a.iter().map(Option::as_ref),
+                b.iter().map(Option::as_ref),
+                same_pose,
+            )
     }
 
     fn same_path(a: &RigidPath, b: &RigidPath) -> bool {
@@ -423,14 +437,9 @@ mod kept {
                     && same_rows(&k.q_eff, q_eff)
                     && k.legs.are(config)
                     && k.measured.len() == s.samples.len()
-                    && k.measured
-                        .iter()
-                        .zip(measured(s))
-                        .all(|(a, b)| match (a, b) {
-                            (Some(a), Some(b)) => bits(a) == bits(&b),
-                            (None, None) => true,
-                            _ => false,
-                        })
+                    && same_each(k.measured.iter().copied(), measured(s), |a, b| {
+                        bits(&a) == bits(&b)
+                    })
             },
             |k| k.path.clone(),
         )
