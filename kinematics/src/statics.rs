@@ -521,6 +521,29 @@ pub struct LoadedSensitivity {
     pub d_loads: [[f64; 3]; 5],
 }
 
+/// The first three rows of the inverse of a loaded Jacobian: the pose's first-order response
+/// to a change of the residual. A response needs only the pose (x, y, phi) of the solution of
+/// `J dz = -f`, so each is three dot products with these rows, where a solve through the
+/// factored Jacobian costs two triangular solves of the whole system; the rows themselves
+/// cost one factorisation (of `J` transposed) and three solves, and a linearisation is read
+/// by about thirty responses (the curvatures, the loads, the calibration's directions).
+struct PoseRows([VN; 3]);
+
+impl PoseRows {
+    /// The rows of `jac`'s inverse; `None` when it is singular.
+    fn of(jac: &MN) -> Option<PoseRows> {
+        let lu = jac.transpose().lu();
+        let row = |k: usize| lu.solve(&VN::from_fn(|i, _| if i == k { 1.0 } else { 0.0 }));
+        Some(PoseRows([row(0)?, row(1)?, row(2)?]))
+    }
+
+    /// The pose's change for the residual's change `df` (per unit of a parameter): the first
+    /// three components of `-J^-1 df`.
+    fn response(&self, df: &VN) -> [f64; 3] {
+        std::array::from_fn(|k| -self.0[k].dot(df))
+    }
+}
+
 /// A loaded equilibrium linearised ([`Robot::linearised_warm`]).
 struct Linearised {
     rest: [(f64, f64); 3],
@@ -528,7 +551,8 @@ struct Linearised {
     z: VN,
     segs: Segments,
     f0: VN,
-    lu: nalgebra::LU<f64, nalgebra::Const<N>, nalgebra::Const<N>>,
+    /// The pose's rows of the inverse Jacobian there.
+    rows: PoseRows,
     /// The residual at `z` with the segments integrated, and the legs' shares it was assembled
     /// from: the integration that linearised the segments gives them (its outputs are
     /// [`deflect3`]'s bit for bit).
@@ -1104,7 +1128,7 @@ impl Robot {
 
     /// The loaded equilibrium along a series (solved as [`Robot::fk_loaded_warm`] does) with
     /// what its first-order responses need: the residual there with the segments linearised,
-    /// and the factored Jacobian.
+    /// and the pose's rows of the inverse Jacobian ([`PoseRows`]).
     fn linearised_warm(
         &self,
         kappa: &[f64; 3],
@@ -1120,14 +1144,15 @@ impl Robot {
         };
         let (segs, exact, terms) = self.segments_and_terms_at(&st, loads, &z);
         let f0 = self.loaded_eval(&st, loads, &z, SegmentMode::Linear(&segs));
-        let lu = self.loaded_jacobian(&st, loads, &z, &segs, &f0).lu();
+        let rows = PoseRows::of(&self.loaded_jacobian(&st, loads, &z, &segs, &f0))
+            .ok_or(FkError::NoSolution { reached: 0.0 })?;
         Ok(Linearised {
             rest,
             st,
             z,
             segs,
             f0,
-            lu,
+            rows,
             exact,
             terms,
         })
@@ -1151,11 +1176,11 @@ impl Robot {
             z,
             segs,
             f0,
-            lu,
+            rows,
             exact,
             terms,
         } = self.linearised_warm(kappa, loads, guess, warm)?;
-        let d_loads = self.load_columns(&st, loads, &z, &segs, &f0, &lu)?;
+        let d_loads = self.load_columns(&st, loads, &z, &segs, &f0, &rows);
         // The curvatures change the segments themselves: their residual is integrated again
         // (the same fixed-step integration, smooth in the curvature). Leg i's curvature
         // changes its segment alone: the other legs' shares are those at `z`. The three
@@ -1179,11 +1204,7 @@ impl Robot {
                 out: outs[i],
                 ..moved[i]
             };
-            let ft = (self.assemble(loads, &z, &t) - exact) / h[i];
-            let dz = lu
-                .solve(&(-ft))
-                .ok_or(FkError::NoSolution { reached: 0.0 })?;
-            *col = [dz[0], dz[1], dz[2]];
+            *col = rows.response(&((self.assemble(loads, &z, &t) - exact) / h[i]));
         }
         Ok(LoadedSensitivity {
             pose: Pose::new(z[0], z[1], z[2]),
@@ -1197,9 +1218,9 @@ impl Robot {
     /// differs from this one by `step` in one parameter of its drawing or tendon map, with its
     /// curvatures at the row and its springs' rest angles), the change of the platform pose
     /// (x mm, y mm, phi rad) per unit of the parameter, by the implicit function theorem: the
-    /// other robot's residual at this equilibrium, through this one's factored Jacobian. What
-    /// a fit of calibration parameters around a loaded model needs of each row, without an
-    /// equilibrium solved per parameter.
+    /// other robot's residual at this equilibrium, through the pose's rows of this one's
+    /// inverse Jacobian. What a fit of calibration parameters around a loaded model needs of
+    /// each row, without an equilibrium solved per parameter.
     ///
     /// The other robot's residual is assembled leg by leg: a leg with this one's drawing,
     /// curvature and rest angles keeps its share at `z`; a leg whose segment is this one's (the
@@ -1223,7 +1244,7 @@ impl Robot {
             st,
             z,
             segs,
-            lu,
+            rows,
             exact,
             terms,
             ..
@@ -1275,11 +1296,7 @@ impl Robot {
             }
         }
         for ((d, t), o) in directions.iter().zip(&shares).zip(out.iter_mut()) {
-            let ft = (d.robot.assemble(loads, &z, t) - exact) / d.step;
-            let dz = lu
-                .solve(&(-ft))
-                .ok_or(FkError::NoSolution { reached: 0.0 })?;
-            *o = [dz[0], dz[1], dz[2]];
+            *o = rows.response(&((d.robot.assemble(loads, &z, t) - exact) / d.step));
         }
         Ok(Pose::new(z[0], z[1], z[2]))
     }
@@ -1294,12 +1311,13 @@ impl Robot {
     ) -> Result<[[f64; 3]; 5], FkError> {
         let segs = self.segments_at(st, loads, z);
         let f0 = self.loaded_eval(st, loads, z, SegmentMode::Linear(&segs));
-        let lu = self.loaded_jacobian(st, loads, z, &segs, &f0).lu();
-        self.load_columns(st, loads, z, &segs, &f0, &lu)
+        let rows = PoseRows::of(&self.loaded_jacobian(st, loads, z, &segs, &f0))
+            .ok_or(FkError::NoSolution { reached: 0.0 })?;
+        Ok(self.load_columns(st, loads, z, &segs, &f0, &rows))
     }
 
     /// The responses of the equilibrium `z` to the five load parameters, from the residual
-    /// there (`f0`, segments linearised as `segs`) and the factored Jacobian `lu`.
+    /// there (`f0`, segments linearised as `segs`) and the pose's rows of the inverse Jacobian.
     fn load_columns(
         &self,
         st: &LoadedSetup,
@@ -1307,8 +1325,8 @@ impl Robot {
         z: &VN,
         segs: &Segments,
         f0: &VN,
-        lu: &nalgebra::LU<f64, nalgebra::Const<N>, nalgebra::Const<N>>,
-    ) -> Result<[[f64; 3]; 5], FkError> {
+        rows: &PoseRows,
+    ) -> [[f64; 3]; 5] {
         let lin = SegmentMode::Linear(segs);
         let mut out = [[0.0; 3]; 5];
         for (j, o) in out.iter_mut().enumerate() {
@@ -1321,13 +1339,9 @@ impl Robot {
                 3 => l.k_m += h,
                 _ => l.k_p += h,
             }
-            let ft = (self.loaded_eval(st, &l, z, lin) - *f0) / h;
-            let dz = lu
-                .solve(&(-ft))
-                .ok_or(FkError::NoSolution { reached: 0.0 })?;
-            *o = [dz[0], dz[1], dz[2]];
+            *o = rows.response(&((self.loaded_eval(st, &l, z, lin) - *f0) / h));
         }
-        Ok(out)
+        out
     }
 
     fn equilibrium_of(
@@ -1739,6 +1753,41 @@ mod tests {
         (cfg, r, target, kappa)
     }
 
+    #[test]
+    fn the_pose_rows_of_the_inverse_respond_as_a_solve_through_the_factored_jacobian() {
+        // The responses read the first three components of -J^-1 df: the rows of the inverse
+        // give them (other roundings), for the Jacobian of a loaded equilibrium with springs
+        // and for random changes of the residual.
+        let (_, r, target, kappa) = nominal_at_target();
+        let loads = springs_and_load();
+        let lin = r
+            .linearised_warm(&kappa, &loads, &target, &mut LoadedWarm::default())
+            .unwrap();
+        let jac = r.loaded_jacobian(&lin.st, &loads, &lin.z, &lin.segs, &lin.f0);
+        let lu = jac.lu();
+        let mut seed = 0x2545_f491_4f6c_dd1d_u64;
+        for _ in 0..50 {
+            let df = VN::from_fn(|_, _| {
+                seed ^= seed << 13;
+                seed ^= seed >> 7;
+                seed ^= seed << 17;
+                (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+            });
+            let dz = lu.solve(&(-df)).unwrap();
+            let got = lin.rows.response(&df);
+            for k in 0..3 {
+                let scale = dz.amax().max(1e-300);
+                assert!(
+                    (got[k] - dz[k]).abs() <= 1e-10 * scale,
+                    "component {k}: {} against {}",
+                    got[k],
+                    dz[k]
+                );
+            }
+        }
+        assert!(PoseRows::of(&MN::zeros()).is_none());
+    }
+
     /// [`Robot::loaded_directions_warm`]'s columns as they were before its legs were assembled
     /// one by one: each direction's residual evaluated whole, its three segments integrated.
     fn whole_columns(
@@ -1756,8 +1805,7 @@ mod tests {
         for (d, o) in dirs.iter().zip(out.iter_mut()) {
             let st = d.robot.loaded_setup_at_rest(&d.kappa, d.rest);
             let res = d.robot.loaded_eval(&st, loads, &lin.z, SegmentMode::Exact);
-            let dz = lin.lu.solve(&(-(res - exact) / d.step)).unwrap();
-            *o = [dz[0], dz[1], dz[2]];
+            *o = lin.rows.response(&((res - exact) / d.step));
         }
         Pose::new(lin.z[0], lin.z[1], lin.z[2])
     }
