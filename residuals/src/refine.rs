@@ -632,16 +632,15 @@ impl Refit<'_> {
             .zip(&self.states)
             .enumerate()
         {
-            let want = crate::model::mask(s.samples.len(), rows);
             let how = crate::model::Solving {
                 states: Some(st),
                 poses_only: true,
                 ..Default::default()
             };
-            let mut preds = model.predict_where_from(s, &|i| want[i], how);
+            let mut poses = model.predict_poses(s, rows, how);
             if let Some(fr) = &self.friction {
-                for (r, &i) in rows.iter().enumerate() {
-                    if let Some(p) = preds[i].pose.as_mut() {
+                for (r, pose) in poses.iter_mut().enumerate() {
+                    if let Some(p) = pose.as_mut() {
                         let d = fr.at(si, r, x);
                         for c in 0..3 {
                             p[c] += d[c];
@@ -649,8 +648,8 @@ impl Refit<'_> {
                     }
                 }
             }
-            for &i in rows {
-                let (Some(m), Some(p)) = (s.samples[i].pose, preds[i].pose) else {
+            for (&i, pose) in rows.iter().zip(poses) {
+                let (Some(m), Some(p)) = (s.samples[i].pose, pose) else {
                     r[3 * k] = 0.0;
                     r[3 * k + 1] = 0.0;
                     r[3 * k + 2] = 0.0;
