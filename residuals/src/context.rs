@@ -750,7 +750,7 @@ impl Errors {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use pcr_robot::RobotConfig;
 
@@ -775,7 +775,7 @@ mod tests {
 
     /// 403 rows of the three motors swinging around home, measured a little off the model's
     /// poses, so that every residual differs.
-    fn moving_series() -> Vec<Series> {
+    pub(crate) fn moving_series() -> Vec<Series> {
         series_of(
             403,
             |_, t, home| {

@@ -4,7 +4,7 @@
 
 use super::joint_fit::{fit_joint, nuisance_change};
 use super::motor_change::motor_change;
-use super::profile::{minimise_1d, profile_std, search_rows, sse_at};
+use super::profile::{minimise_1d, profile_std, search_rows};
 use super::{lerp, Effect, Parameter};
 use crate::context::Context;
 use crate::extension::Extension;
@@ -47,6 +47,60 @@ fn play_on(q: &[[f64; 3]], m: usize, b: f64, out: &mut [f64]) {
     for (o, v) in out.iter_mut().zip(q) {
         y = y.clamp(v[m] - h, v[m] + h);
         *o = y;
+    }
+}
+
+/// What a profile over one motor's play reads of each searched row, so that the training
+/// SSE at a play is a sum of a few products per row instead of a linearised pose change per row
+/// ([`motor_delta`]): with the other motors' outputs held, row i's residual after the change is
+/// `h_i - g_i u_i`, where `u_i` is motor m's output less the model's effective position there,
+/// `g_i` the row's Jacobian column of motor m (orientation weighted) and `h_i` the residual
+/// less the other motors' change. Its square is `|h_i|^2 - 2 u_i g_i.h_i + u_i^2 |g_i|^2`.
+struct PlayTerms {
+    /// Per searched row: series, row in it, the model's effective position of motor m (steps),
+    /// `g.h` and `|g|^2`.
+    rows: Vec<(usize, usize, f64, f64, f64)>,
+    /// The sum of `|h_i|^2`.
+    constant: f64,
+}
+
+impl PlayTerms {
+    /// The terms of the rows `rows` of `ctx` for motor `m`, the other motors' outputs `cur` (per
+    /// series and row, steps).
+    fn new(ctx: &Context, rows: &[usize], cur: &[Vec<[f64; 3]>], m: usize) -> PlayTerms {
+        let mut constant = 0.0;
+        let rows = rows
+            .iter()
+            .map(|&i| {
+                let row = &ctx.rows[i];
+                let q = ctx.pred(row).q_eff;
+                let mut o = cur[row.s][row.k];
+                o[m] = q[m];
+                let others = motor_delta(ctx, i, [o[0] - q[0], o[1] - q[1], o[2] - q[2]]);
+                let mut unit = [0.0; 3];
+                unit[m] = 1.0;
+                let g = motor_delta(ctx, i, unit);
+                let h: [f64; 3] = std::array::from_fn(|a| row.r[a] - others[a]);
+                constant += h[0] * h[0] + h[1] * h[1] + h[2] * h[2];
+                let gh = g[0] * h[0] + g[1] * h[1] + g[2] * h[2];
+                let gg = g[0] * g[0] + g[1] * g[1] + g[2] * g[2];
+                (row.s, row.k, q[m], gh, gg)
+            })
+            .collect();
+        PlayTerms { rows, constant }
+    }
+
+    /// The searched rows' SSE with motor m's output `out` (per series and row, steps).
+    fn sse(&self, out: &[Vec<f64>]) -> f64 {
+        self.constant
+            + self
+                .rows
+                .iter()
+                .map(|&(s, k, q, gh, gg)| {
+                    let u = out[s][k] - q;
+                    u * (u * gg - 2.0 * gh)
+                })
+                .sum::<f64>()
     }
 }
 
@@ -124,24 +178,21 @@ impl Effect for Backlash {
             })
             .collect();
         let mut col: Vec<Vec<f64>> = pre.iter().map(|q| vec![0.0; q.len()]).collect();
+        // Each series' output is needed up to its last searched row only.
+        let mut ends = vec![0usize; pre.len()];
+        for &i in &rows {
+            let row = &ctx.rows[i];
+            ends[row.s] = ends[row.s].max(row.k + 1);
+        }
         for _sweep in 0..2 {
             for m in 0..3 {
+                let terms = PlayTerms::new(ctx, &rows, &cur, m);
                 let (x, s, curv) = minimise_1d(
                     &mut |v| {
-                        for (c, q) in col.iter_mut().zip(&pre) {
-                            play_on(q, m, v.max(0.0), c);
+                        for ((c, q), &end) in col.iter_mut().zip(&pre).zip(&ends) {
+                            play_on(&q[..end], m, v.max(0.0), &mut c[..end]);
                         }
-                        let d: Vec<[f64; 3]> = rows
-                            .iter()
-                            .map(|&i| {
-                                let row = &ctx.rows[i];
-                                let q = ctx.pred(row).q_eff;
-                                let mut o = cur[row.s][row.k];
-                                o[m] = col[row.s][row.k];
-                                motor_delta(ctx, i, [o[0] - q[0], o[1] - q[1], o[2] - q[2]])
-                            })
-                            .collect();
-                        sse_at(ctx, &rows, &d)
+                        terms.sse(&col)
                     },
                     &grid_of(m),
                 );
@@ -246,5 +297,76 @@ mod tests {
         let out: Vec<f64> = q.iter().map(|v| v[0]).collect();
         assert_eq!(out, vec![0.0, 0.0, 2.0, 2.0, 2.0, 1.0, 2.0]);
         assert_eq!(q[2][1], 3.0, "no play on motor 2");
+    }
+
+    /// The profile's SSE at a play, from the rows' terms, is the SSE of the residuals after
+    /// the linearised pose change ([`motor_change`]) of the outputs through that play.
+    #[test]
+    fn the_play_terms_give_the_sse_of_the_linearised_change() {
+        use crate::effects::profile::sse_at;
+        use crate::model::ExtendedModel;
+        use crate::series::Blocks;
+        let series = crate::context::tests::moving_series();
+        let blocks = Blocks::in_time(&series, 1.0, 3);
+        let mut cfg = RobotConfig::nominal();
+        cfg.effects.backlash = Some(robot::Backlash {
+            steps: [2.0, 3.0, 1.0],
+        });
+        let model = ExtendedModel::new(&cfg, crate::effects::chain()).unwrap();
+        let ctx = Context::new(&series, model, &blocks, 50.0);
+        let rows = search_rows(&ctx.train());
+        let pre: Vec<Vec<[f64; 3]>> = ctx
+            .series
+            .iter()
+            .map(|s| ctx.model.steps_before_play(s, &ctx.model.config.effects))
+            .collect();
+        // The other motors through plays of their own.
+        let cur: Vec<Vec<[f64; 3]>> = pre
+            .iter()
+            .map(|q| {
+                let mut q = q.clone();
+                apply(
+                    &mut q,
+                    &robot::Backlash {
+                        steps: [4.0, 1.5, 2.5],
+                    },
+                );
+                q
+            })
+            .collect();
+        for m in 0..3 {
+            let terms = PlayTerms::new(&ctx, &rows, &cur, m);
+            for v in [0.0, 0.5, 2.0, 7.0] {
+                let out: Vec<Vec<f64>> = pre
+                    .iter()
+                    .map(|q| {
+                        let mut o = vec![0.0; q.len()];
+                        play_on(q, m, v, &mut o);
+                        o
+                    })
+                    .collect();
+                let q_new: Vec<Vec<[f64; 3]>> = cur
+                    .iter()
+                    .zip(&out)
+                    .map(|(c, o)| {
+                        c.iter()
+                            .zip(o)
+                            .map(|(c, o)| {
+                                let mut c = *c;
+                                c[m] = *o;
+                                c
+                            })
+                            .collect()
+                    })
+                    .collect();
+                let want = sse_at(&ctx, &rows, &motor_change(&ctx, &q_new, Some(&rows)));
+                let got = terms.sse(&out);
+                assert!(want > 0.0);
+                assert!(
+                    (got - want).abs() <= 1e-9 * want,
+                    "motor {m}, play {v}: {got} {want}"
+                );
+            }
+        }
     }
 }
