@@ -51,23 +51,99 @@ fn play_on(q: &[[f64; 3]], m: usize, b: f64, out: &mut [f64]) {
 }
 
 /// What a profile over one motor's play reads of each searched row, so that the training
-/// SSE at a play is a sum of a few products per row instead of a linearised pose change per row
-/// ([`motor_delta`]): with the other motors' outputs held, row i's residual after the change is
-/// `h_i - g_i u_i`, where `u_i` is motor m's output less the model's effective position there,
-/// `g_i` the row's Jacobian column of motor m (orientation weighted) and `h_i` the residual
-/// less the other motors' change. Its square is `|h_i|^2 - 2 u_i g_i.h_i + u_i^2 |g_i|^2`.
+/// SSE at a play is a few products per searched row and a step per monotone run of the motor's
+/// input, instead of the play run through every row and a linearised pose change per row
+/// ([`motor_delta`]).
+///
+/// With the other motors' outputs held, row i's residual after the change is `h_i - g_i u_i`,
+/// where `u_i` is motor m's output less the model's effective position there, `g_i` the row's
+/// Jacobian column of motor m (orientation weighted) and `h_i` the residual less the other
+/// motors' change: its square is `|h_i|^2 - 2 u_i g_i.h_i + u_i^2 |g_i|^2`.
+///
+/// The output itself: while the input rises (or holds), the play's upper edge never binds (the
+/// output is already within half the play of the input before), so the output is the larger of
+/// what it was when the rise began and the input less half the play; while it falls, the
+/// smaller of that and the input plus half the play. The output at a row is then its run's
+/// entry and its own input, and each run's entry the run before's at its last row: the same
+/// selections as [`play_on`]'s, bit for bit.
 struct PlayTerms {
-    /// Per searched row: series, row in it, the model's effective position of motor m (steps),
-    /// `g.h` and `|g|^2`.
-    rows: Vec<(usize, usize, f64, f64, f64)>,
+    /// Per searched row: its run (an index into `runs`), motor m's input there (steps), the
+    /// model's effective position of motor m (steps), `g.h` and `|g|^2`.
+    rows: Vec<(usize, f64, f64, f64, f64)>,
+    /// Per series, its monotone runs of motor m's input up to its last searched row.
+    runs: Vec<Runs>,
     /// The sum of `|h_i|^2`.
     constant: f64,
 }
 
+/// A series' input of one motor up to some row, as monotone runs: the input at its first row
+/// (where the play's output starts), and per run its input at its last row and whether it rises
+/// (a run of rows that hold their input rises).
+struct Runs {
+    first: f64,
+    runs: Vec<(f64, bool)>,
+    /// The index of its first run among every series' runs (of [`PlayTerms`]).
+    offset: usize,
+}
+
+impl Runs {
+    /// The runs of `q[..end]`'s motor `m`, and the run of each row (an index from 0).
+    fn of(q: &[[f64; 3]], m: usize, end: usize) -> (Runs, Vec<usize>) {
+        let mut runs = Vec::new();
+        let mut run_of = vec![0; end];
+        let mut rises: Option<bool> = None;
+        for k in 1..end {
+            let d = q[k][m] - q[k - 1][m];
+            if d != 0.0 {
+                let up = d > 0.0;
+                if rises.is_some_and(|r| r != up) {
+                    runs.push((q[k - 1][m], !up));
+                }
+                rises = Some(up);
+            }
+            run_of[k] = runs.len();
+        }
+        if end > 0 {
+            runs.push((q[end - 1][m], rises.unwrap_or(true)));
+        }
+        let first = q.first().map_or(0.0, |v| v[m]);
+        (
+            Runs {
+                first,
+                runs,
+                offset: 0,
+            },
+            run_of,
+        )
+    }
+}
+
 impl PlayTerms {
-    /// The terms of the rows `rows` of `ctx` for motor `m`, the other motors' outputs `cur` (per
-    /// series and row, steps).
-    fn new(ctx: &Context, rows: &[usize], cur: &[Vec<[f64; 3]>], m: usize) -> PlayTerms {
+    /// The terms of the rows `rows` of `ctx` for motor `m`: its input before the play `pre`
+    /// and the other motors' outputs `cur` (per series and row, steps).
+    fn new(
+        ctx: &Context,
+        rows: &[usize],
+        pre: &[Vec<[f64; 3]>],
+        cur: &[Vec<[f64; 3]>],
+        m: usize,
+    ) -> PlayTerms {
+        let mut ends = vec![0usize; pre.len()];
+        for &i in rows {
+            let row = &ctx.rows[i];
+            ends[row.s] = ends[row.s].max(row.k + 1);
+        }
+        let mut offset = 0;
+        let (runs, run_of): (Vec<Runs>, Vec<Vec<usize>>) = pre
+            .iter()
+            .zip(&ends)
+            .map(|(q, &end)| {
+                let (mut r, of) = Runs::of(q, m, end);
+                r.offset = offset;
+                offset += r.runs.len();
+                (r, of)
+            })
+            .unzip();
         let mut constant = 0.0;
         let rows = rows
             .iter()
@@ -84,20 +160,44 @@ impl PlayTerms {
                 constant += h[0] * h[0] + h[1] * h[1] + h[2] * h[2];
                 let gh = g[0] * h[0] + g[1] * h[1] + g[2] * h[2];
                 let gg = g[0] * g[0] + g[1] * g[1] + g[2] * g[2];
-                (row.s, row.k, q[m], gh, gg)
+                let run = runs[row.s].offset + run_of[row.s][row.k];
+                (run, pre[row.s][row.k][m], q[m], gh, gg)
             })
             .collect();
-        PlayTerms { rows, constant }
+        PlayTerms {
+            rows,
+            runs,
+            constant,
+        }
     }
 
-    /// The searched rows' SSE with motor m's output `out` (per series and row, steps).
-    fn sse(&self, out: &[Vec<f64>]) -> f64 {
+    /// The searched rows' SSE with a play of `b` steps (not negative) on motor m.
+    fn sse(&self, b: f64, entries: &mut Vec<(f64, bool)>) -> f64 {
+        let h = 0.5 * b;
+        entries.clear();
+        for r in &self.runs {
+            let mut y = r.first;
+            for &(last, rises) in &r.runs {
+                entries.push((y, rises));
+                y = if rises {
+                    y.max(last - h)
+                } else {
+                    y.min(last + h)
+                };
+            }
+        }
         self.constant
             + self
                 .rows
                 .iter()
-                .map(|&(s, k, q, gh, gg)| {
-                    let u = out[s][k] - q;
+                .map(|&(run, input, q, gh, gg)| {
+                    let (y, rises) = entries[run];
+                    let out = if rises {
+                        y.max(input - h)
+                    } else {
+                        y.min(input + h)
+                    };
+                    let u = out - q;
                     u * (u * gg - 2.0 * gh)
                 })
                 .sum::<f64>()
@@ -177,25 +277,12 @@ impl Effect for Backlash {
                 q
             })
             .collect();
-        let mut col: Vec<Vec<f64>> = pre.iter().map(|q| vec![0.0; q.len()]).collect();
-        // Each series' output is needed up to its last searched row only.
-        let mut ends = vec![0usize; pre.len()];
-        for &i in &rows {
-            let row = &ctx.rows[i];
-            ends[row.s] = ends[row.s].max(row.k + 1);
-        }
+        let mut entries = Vec::new();
         for _sweep in 0..2 {
             for m in 0..3 {
-                let terms = PlayTerms::new(ctx, &rows, &cur, m);
-                let (x, s, curv) = minimise_1d(
-                    &mut |v| {
-                        for ((c, q), &end) in col.iter_mut().zip(&pre).zip(&ends) {
-                            play_on(&q[..end], m, v.max(0.0), &mut c[..end]);
-                        }
-                        terms.sse(&col)
-                    },
-                    &grid_of(m),
-                );
+                let terms = PlayTerms::new(ctx, &rows, &pre, &cur, m);
+                let (x, s, curv) =
+                    minimise_1d(&mut |v| terms.sse(v.max(0.0), &mut entries), &grid_of(m));
                 b[m] = x.max(0.0);
                 stds[m] = profile_std(s, 3 * rows.len(), curv);
                 for (c, q) in cur.iter_mut().zip(&pre) {
@@ -335,7 +422,7 @@ mod tests {
             })
             .collect();
         for m in 0..3 {
-            let terms = PlayTerms::new(&ctx, &rows, &cur, m);
+            let terms = PlayTerms::new(&ctx, &rows, &pre, &cur, m);
             for v in [0.0, 0.5, 2.0, 7.0] {
                 let out: Vec<Vec<f64>> = pre
                     .iter()
@@ -360,7 +447,7 @@ mod tests {
                     })
                     .collect();
                 let want = sse_at(&ctx, &rows, &motor_change(&ctx, &q_new, Some(&rows)));
-                let got = terms.sse(&out);
+                let got = terms.sse(v, &mut Vec::new());
                 assert!(want > 0.0);
                 assert!(
                     (got - want).abs() <= 1e-9 * want,
