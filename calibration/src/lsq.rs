@@ -100,6 +100,14 @@ pub struct Options {
     pub stall_window: usize,
     /// See [`Options::stall_window`].
     pub stall_ftol: f64,
+    /// Whether a step that does not lower the cost also ends the iteration when both its
+    /// actual and its predicted reduction are within `ftol` of the cost (MINPACK's `lmdif` test,
+    /// `|actred| <= ftol` and `prered <= ftol`, which it makes whether or not the step is taken;
+    /// SciPy's `trf`, the default, tests taken steps alone and shrinks the radius instead).
+    /// Where the residuals carry noise above the quadratic model's gain at the optimum (a model
+    /// solved iteratively), SciPy's test refuses step after step, each a quarter of the last,
+    /// until one gains by chance.
+    pub ftol_refused: bool,
 }
 
 impl Default for Options {
@@ -113,6 +121,7 @@ impl Default for Options {
             initial_radius_factor: 1.0,
             stall_window: 0,
             stall_ftol: 0.0,
+            ftol_refused: false,
         }
     }
 }
@@ -554,6 +563,72 @@ mod tests {
             stalled.cost,
             full.cost
         );
+    }
+
+    /// [`Exp`] whose residuals carry a jitter (1e-7 each) that moves the cost (0.045) by about
+    /// the tolerance of a relative 1e-6: near the optimum SciPy's test refuses step after step,
+    /// each a quarter of the last, until one gains by chance or the step itself is below `xtol`;
+    /// MINPACK's ends at the first refused step whose actual and predicted gains are within
+    /// the tolerance (16 evaluations against 22).
+    struct Trembling;
+    impl Problem for Trembling {
+        fn residual_count(&self) -> usize {
+            20
+        }
+        fn residuals(&mut self, x: &[f64], r: &mut [f64]) -> Result<(), String> {
+            Exp.residuals(x, r)?;
+            for (k, r) in r.iter_mut().enumerate() {
+                *r += 1e-7 * (1e9 * x[0] + 1e8 * x[1] + k as f64).sin();
+            }
+            Ok(())
+        }
+        fn jacobian(
+            &mut self,
+            x: &[f64],
+            r: &[f64],
+            upper: &[f64],
+            j: &mut DMatrix<f64>,
+        ) -> Result<(), String> {
+            Jittered.jacobian(x, r, upper, j)
+        }
+    }
+
+    #[test]
+    fn a_refused_step_within_the_tolerance_ends_the_iteration_at_the_optimum() {
+        let run = |ftol_refused| {
+            let opt = Options {
+                ftol: 1e-6,
+                xtol: 1e-14,
+                ftol_refused,
+                initial_radius_factor: 100.0,
+                ..Options::default()
+            };
+            solve(&mut Trembling, &[1.0, 0.1], &[-INF; 2], &[INF; 2], &opt).unwrap()
+        };
+        let scipy = run(false);
+        let minpack = run(true);
+        assert!(minpack.status.converged() && scipy.status.converged());
+        assert!(
+            minpack.evaluations < scipy.evaluations,
+            "{} against {} evaluations",
+            minpack.evaluations,
+            scipy.evaluations
+        );
+        // The same optimum to the tolerance.
+        assert!(
+            (minpack.cost - scipy.cost).abs() <= 1e-6 * scipy.cost,
+            "{} against {}",
+            minpack.cost,
+            scipy.cost
+        );
+        for (a, b) in minpack.x.iter().zip(&scipy.x) {
+            assert!(
+                (a - b).abs() < 1e-4 * b.abs(),
+                "{:?} {:?}",
+                minpack.x,
+                scipy.x
+            );
+        }
     }
 
     #[test]

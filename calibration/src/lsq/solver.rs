@@ -240,7 +240,12 @@ impl<'a, P: Problem + ?Sized> Solver<'a, P> {
             ratio,
             self.opt.ftol,
             self.opt.xtol,
-        );
+        )
+        .or_else(|| {
+            let tol = self.opt.ftol * self.cost;
+            let within = actual <= 0.0 && -actual <= tol && step.predicted <= tol;
+            (self.opt.ftol_refused && within).then_some(Status::Cost)
+        });
         if status.is_none() {
             if delta_new > 0.0 {
                 self.alpha *= self.delta / delta_new;
