@@ -882,7 +882,7 @@ impl<'a> Search<'a> {
                 rows,
                 true,
                 evaluations,
-                true,
+                crate::refine::Errors::AtOptimum,
             )
         };
         set.opts.progress.stage(
@@ -1128,6 +1128,15 @@ const FROM_DRAWING_GAIN: f64 = 0.99;
 /// (-0.273, -0.288 and then -0.300 N).
 const MIN_EXTRAPOLATION: f64 = 0.01;
 
+/// Smallest move of a parameter, in its standard errors, that the extrapolation after the
+/// alternations ([`aitken`]) is made for: a parameter near zero moves by many times
+/// [`MIN_EXTRAPOLATION`] of its value and by little of its error (springs + frame + backlash at
+/// 1x: the frame's dy -0.029 -> -0.019 mm predicted, against an error of 0.052, for another
+/// alternation of 0.5 s whose held-out error was no lower), where a load creeping along its
+/// valley with the calibration moves by two errors (external_load-1x: force y -0.273 -> -0.308
+/// N, an error of 0.017).
+const EXTRAPOLATION_ERRORS: f64 = 0.25;
+
 /// Largest ratio of two successive alternation steps of a parameter that is extrapolated
 /// ([`aitken`]): above it the sequence is not converging fast enough for three iterates to say
 /// where it goes.
@@ -1180,14 +1189,16 @@ fn from_drawing<'a>(
         .filter(|c| c.rows.len() + 5 >= n_test)
     };
     // One alternation from (config, ctx): the calibration from the drawing with its effects,
-    // then its effects refined on it.
+    // then its effects refined on it, with their errors there (approximate: what a move of the
+    // extrapolation is weighed against).
     let alternate = |config: &RobotConfig,
                      ctx: &Context<'a>|
-     -> Option<(RobotConfig, Context<'a>)> {
+     -> Option<(RobotConfig, Context<'a>, Option<Vec<f64>>)> {
         let cal = crate::recalibration::recalibrated(config, ctx, set.drawing, recal)?;
-        let refined = crate::refine::search(&cal, &ctx.model, set.series, set.blocks, set.w_phi);
+        let (refined, errors) =
+            crate::refine::search_with_errors(&cal, &ctx.model, set.series, set.blocks, set.w_phi);
         let model = ExtendedModel::like(&refined, &ctx.model).ok()?;
-        judged(model).map(|c| (refined, c))
+        judged(model).map(|c| (refined, c, errors))
     };
     // The iterate kept (the best held-out result, `None`: the start) with every row predicted;
     // the start where its model does not predict them.
@@ -1213,17 +1224,21 @@ fn from_drawing<'a>(
     let mut best: Option<(RobotConfig, Context<'a>)> = None;
     let mut last: Option<(RobotConfig, Context<'a>)> = None;
     let mut last_share: Option<f64> = None;
+    // The errors of the effects' parameters at the last iterate.
+    let mut errors: Option<Vec<f64>> = None;
     for _ in 0..FROM_DRAWING_ROUNDS {
         let from = last.as_ref().or(best.as_ref()).unwrap_or(&start);
-        let Some((refined, full)) = alternate(&from.0, &from.1) else {
+        let Some((refined, full, e)) = alternate(&from.0, &from.1) else {
             break;
         };
+        errors = e;
         let ms = held_out(&full);
         let values = crate::refine::values(&refined.effects);
         tracing::debug!(
             held_out_ms = ms,
             best_ms,
             ?values,
+            ?errors,
             "calibration from the drawing"
         );
         iterates.push(values);
@@ -1277,13 +1292,8 @@ fn from_drawing<'a>(
     else {
         return Ok(finish(best, start));
     };
-    // Where the alternation has arrived (no parameter would move by more than
-    // `MIN_EXTRAPOLATION` of its value), another alternation is not made for it.
-    if target
-        .iter()
-        .zip(&iterates[n - 1])
-        .all(|(t, v)| (t - v).abs() <= MIN_EXTRAPOLATION * v.abs())
-    {
+    // Where the alternation has arrived, another alternation is not made for it.
+    if arrived(&target, &iterates[n - 1], errors.as_deref()) {
         return Ok(finish(best, start));
     }
     let from = last.as_ref().or(best.as_ref()).unwrap_or(&start);
@@ -1295,7 +1305,7 @@ fn from_drawing<'a>(
     else {
         return Ok(finish(best, start));
     };
-    if let Some((refined, full)) = alternate(&jumped, &jctx) {
+    if let Some((refined, full, _)) = alternate(&jumped, &jctx) {
         let ms = held_out(&full);
         tracing::debug!(
             held_out_ms = ms,
@@ -1346,6 +1356,22 @@ fn effects_unphysical_unless_confirmed(
     } else {
         bad
     }
+}
+
+/// Whether the alternations of the calibration from the drawing have arrived where their
+/// extrapolation `target` says they are heading from the last iterate `last` (both [`values`]'
+/// order): no parameter would move by more than [`MIN_EXTRAPOLATION`] of its value, or, with the
+/// parameters' standard errors `errors`, by more than [`EXTRAPOLATION_ERRORS`] of its error.
+///
+/// [`values`]: crate::refine::values
+fn arrived(target: &[f64], last: &[f64], errors: Option<&[f64]>) -> bool {
+    target.iter().zip(last).enumerate().all(|(k, (t, v))| {
+        let d = (t - v).abs();
+        d <= MIN_EXTRAPOLATION * v.abs()
+            || errors
+                .and_then(|e| e.get(k))
+                .is_some_and(|s| d <= EXTRAPOLATION_ERRORS * s)
+    })
 }
 
 /// The share of the held-out mean square the next alternation of the calibration from the
@@ -1581,6 +1607,21 @@ mod tests {
     /// after 25 % and 2.7 % (backlash + friction at 1x) it is below the 1 % an alternation must
     /// take off, after 10 % and 5 % above; none is expected from the first alternation alone,
     /// nor after one that took nothing off.
+    #[test]
+    fn the_alternations_arrive_where_no_parameter_would_move_by_a_share_of_its_error() {
+        // A frame's dy near zero: 36 % of its value, a fifth of its error (springs + frame +
+        // backlash at 1x).
+        let frame = ([0.7308, -0.0187], [0.7308, -0.0291], [0.049, 0.0526]);
+        assert!(!arrived(&frame.0, &frame.1, None));
+        assert!(arrived(&frame.0, &frame.1, Some(&frame.2)));
+        // A load creeping along its valley: two errors (external_load-1x).
+        let load = ([0.4016, -0.3079], [0.3988, -0.2726], [0.0131, 0.0164]);
+        assert!(!arrived(&load.0, &load.1, Some(&load.2)));
+        // Within 1 % of every value: arrived, with or without errors.
+        assert!(arrived(&[300.5, 2.0], &[300.1, 2.01], None));
+        assert!(arrived(&[300.5, 2.0], &[300.1, 2.01], Some(&[0.1, 0.001])));
+    }
+
     #[test]
     fn the_next_alternation_is_expected_to_gain_as_the_last_two_did() {
         let threshold = 1.0 - FROM_DRAWING_GAIN;

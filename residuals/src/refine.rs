@@ -742,7 +742,7 @@ pub fn refine(
         max_rows,
         calibration,
         MAX_EVALUATIONS,
-        false,
+        Errors::No,
     )
     .0
 }
@@ -759,14 +759,52 @@ pub(crate) fn search(
     refine(config, like, series, blocks, w_phi, SEARCH_ROWS, true)
 }
 
-/// [`refine`] (at most `max_evaluations` of the model), with `errors` the standard errors of
-/// the effects' parameters ([`values`]' order, the solver's units) on the rows it refined on:
+/// [`search`] with the standard errors of the effects' parameters where it ended, approximate
+/// ([`Errors::Approximate`]); `None` as [`refine_with_errors`] gives it.
+pub(crate) fn search_with_errors(
+    config: &RobotConfig,
+    like: &ExtendedModel,
+    series: &[Series],
+    blocks: &Blocks,
+    w_phi: f64,
+) -> (RobotConfig, Option<Vec<f64>>) {
+    refine_with_errors(
+        config,
+        like,
+        series,
+        blocks,
+        w_phi,
+        SEARCH_ROWS,
+        true,
+        MAX_EVALUATIONS,
+        Errors::Approximate,
+    )
+}
+
+/// The standard errors a refinement gives with its configuration ([`refine_with_errors`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Errors {
+    /// None: a search's refinement, which ends where its cost stalls, re-linearises the
+    /// friction once, and evaluates no Jacobian at its end.
+    No,
+    /// A search's refinement with the errors from the Jacobian the solver last evaluated (at the
+    /// point before its last step) and the residuals where it ended: the scale of each
+    /// parameter's error, for a decision, not for a report.
+    Approximate,
+    /// The errors at the optimum, for the report: the solver evaluates the Jacobian there, has
+    /// no stall test, and re-linearises the friction up to [`FRICTION_RELINEARISATIONS`] times.
+    AtOptimum,
+}
+
+/// [`refine`] (at most `max_evaluations` of the model), with the standard errors of the
+/// effects' parameters ([`values`]' order, the solver's units) on the rows it refined on, as
+/// `errors` asks ([`Errors`]):
 /// clustered by time block as the linear fits'
 /// ([`crate::linear::standard_errors`]), the calibration parameters' prior weighed as in theirs
 /// ([`crate::linear::PRIOR_IN_ERRORS`]). `None` when there is nothing to refine or the solver
-/// fails, and without `errors`: the solver then does not evaluate the Jacobian at the optimum,
-/// which only they read (a Jacobian costs the model's responses on every refined row, about a
-/// tenth of a loaded refinement).
+/// fails, and with [`Errors::No`]; only [`Errors::AtOptimum`] has the solver evaluate the
+/// Jacobian at the optimum (a Jacobian costs the model's responses on every refined row, about
+/// a tenth of a loaded refinement).
 ///
 /// A refinement on a subsample estimates with the subsample's noise: the errors of the fit
 /// that found an effect (every training row) are then too small for the values the model
@@ -781,8 +819,9 @@ pub(crate) fn refine_with_errors(
     max_rows: usize,
     calibration: bool,
     max_evaluations: usize,
-    errors: bool,
+    errors: Errors,
 ) -> (RobotConfig, Option<Vec<f64>>) {
+    let at_optimum = errors == Errors::AtOptimum;
     let slots = slots(&config.effects);
     if slots.is_empty() {
         return (config.clone(), None);
@@ -863,9 +902,9 @@ pub(crate) fn refine_with_errors(
     let opts = Options {
         max_evaluations,
         ftol: 1e-6,
-        jacobian_at_end: errors,
+        jacobian_at_end: at_optimum,
         initial_radius_factor: FIRST_RADIUS,
-        stall_window: if errors { 0 } else { STALL_STEPS },
+        stall_window: if at_optimum { 0 } else { STALL_STEPS },
         stall_ftol: STALL_FTOL,
         ftol_refused: true,
         ..Options::default()
@@ -878,7 +917,11 @@ pub(crate) fn refine_with_errors(
     // move.
     // A search's refinement (no errors) is refined again by the one that reports the errors,
     // on every row: it re-linearises once.
-    let relinearisations = if errors { FRICTION_RELINEARISATIONS } else { 1 };
+    let relinearisations = if at_optimum {
+        FRICTION_RELINEARISATIONS
+    } else {
+        1
+    };
     for _ in 0..relinearisations {
         let Ok(f) = &fit else { break };
         let moved = p.friction.is_some()
@@ -919,7 +962,10 @@ pub(crate) fn refine_with_errors(
     );
     match fit {
         Ok(fit) => {
-            let errors = if errors { p.errors(&fit, blocks) } else { None };
+            let errors = match errors {
+                Errors::No => None,
+                Errors::Approximate | Errors::AtOptimum => p.errors(&fit, blocks),
+            };
             (p.config(&fit.x), errors)
         }
         Err(_) => (config.clone(), None),
