@@ -505,9 +505,13 @@ mod tests {
         assert_eq!(without.jacobians, n_without);
     }
 
-    /// [`Exp`] whose residuals carry a jitter (0.0003 each) that the Jacobian (analytic) does
-    /// not see: a model solved iteratively, each evaluation from the last one's solution.
-    struct Jittered;
+    /// [`Exp`] whose residuals carry a jitter (`amplitude` each, turning over as fast as
+    /// `rate` says in each parameter) that the Jacobian (analytic) does not see: a model solved
+    /// iteratively, each evaluation from the last one's solution.
+    struct Jittered {
+        amplitude: f64,
+        rate: [f64; 2],
+    }
     impl Problem for Jittered {
         fn residual_count(&self) -> usize {
             20
@@ -515,7 +519,7 @@ mod tests {
         fn residuals(&mut self, x: &[f64], r: &mut [f64]) -> Result<(), String> {
             Exp.residuals(x, r)?;
             for (k, r) in r.iter_mut().enumerate() {
-                *r += 3e-4 * (1e7 * x[0] + 1e6 * x[1] + k as f64).sin();
+                *r += self.amplitude * (self.rate[0] * x[0] + self.rate[1] * x[1] + k as f64).sin();
             }
             Ok(())
         }
@@ -544,7 +548,11 @@ mod tests {
                 initial_radius_factor: 100.0,
                 ..Options::default()
             };
-            solve(&mut Jittered, &[1.0, 0.1], &[-INF; 2], &[INF; 2], &opt).unwrap()
+            let mut p = Jittered {
+                amplitude: 3e-4,
+                rate: [1e7, 1e6],
+            };
+            solve(&mut p, &[1.0, 0.1], &[-INF; 2], &[INF; 2], &opt).unwrap()
         };
         let full = run(0, 0.0);
         // Over two steps the cost must fall by 1 % of itself: the jitter's steps take less.
@@ -565,34 +573,11 @@ mod tests {
         );
     }
 
-    /// [`Exp`] whose residuals carry a jitter (1e-7 each) that moves the cost (0.045) by about
-    /// the tolerance of a relative 1e-6: near the optimum SciPy's test refuses step after step,
-    /// each a quarter of the last, until one gains by chance or the step itself is below `xtol`;
+    /// [`Jittered`] by 1e-7 each: the jitter moves the cost (0.045) by about the tolerance of a
+    /// relative 1e-6, so that near the optimum SciPy's test refuses step after step, each a
+    /// quarter of the last, until one gains by chance or the step itself is below `xtol`;
     /// MINPACK's ends at the first refused step whose actual and predicted gains are within
     /// the tolerance (16 evaluations against 22).
-    struct Trembling;
-    impl Problem for Trembling {
-        fn residual_count(&self) -> usize {
-            20
-        }
-        fn residuals(&mut self, x: &[f64], r: &mut [f64]) -> Result<(), String> {
-            Exp.residuals(x, r)?;
-            for (k, r) in r.iter_mut().enumerate() {
-                *r += 1e-7 * (1e9 * x[0] + 1e8 * x[1] + k as f64).sin();
-            }
-            Ok(())
-        }
-        fn jacobian(
-            &mut self,
-            x: &[f64],
-            r: &[f64],
-            upper: &[f64],
-            j: &mut DMatrix<f64>,
-        ) -> Result<(), String> {
-            Jittered.jacobian(x, r, upper, j)
-        }
-    }
-
     #[test]
     fn a_refused_step_within_the_tolerance_ends_the_iteration_at_the_optimum() {
         let run = |ftol_refused| {
@@ -603,7 +588,11 @@ mod tests {
                 initial_radius_factor: 100.0,
                 ..Options::default()
             };
-            solve(&mut Trembling, &[1.0, 0.1], &[-INF; 2], &[INF; 2], &opt).unwrap()
+            let mut p = Jittered {
+                amplitude: 1e-7,
+                rate: [1e9, 1e8],
+            };
+            solve(&mut p, &[1.0, 0.1], &[-INF; 2], &[INF; 2], &opt).unwrap()
         };
         let scipy = run(false);
         let minpack = run(true);

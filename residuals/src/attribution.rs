@@ -1195,8 +1195,14 @@ fn from_drawing<'a>(
                      ctx: &Context<'a>|
      -> Option<(RobotConfig, Context<'a>, Option<Vec<f64>>)> {
         let cal = crate::recalibration::recalibrated(config, ctx, set.drawing, recal)?;
-        let (refined, errors) =
-            crate::refine::search_with_errors(&cal, &ctx.model, set.series, set.blocks, set.w_phi);
+        let (refined, errors) = crate::refine::search_with_errors(
+            &cal,
+            &ctx.model,
+            set.series,
+            set.blocks,
+            set.w_phi,
+            crate::refine::Errors::Approximate,
+        );
         let model = ExtendedModel::like(&refined, &ctx.model).ok()?;
         judged(model).map(|c| (refined, c, errors))
     };
@@ -1603,10 +1609,6 @@ mod tests {
         assert!(aitken(&[0.0], &[1.0, 2.0], &[1.5, 2.0]).is_none());
     }
 
-    /// The next alternation's expected gain continues the last two as a geometric sequence:
-    /// after 25 % and 2.7 % (backlash + friction at 1x) it is below the 1 % an alternation must
-    /// take off, after 10 % and 5 % above; none is expected from the first alternation alone,
-    /// nor after one that took nothing off.
     #[test]
     fn the_alternations_arrive_where_no_parameter_would_move_by_a_share_of_its_error() {
         // A frame's dy near zero: 36 % of its value, a fifth of its error (springs + frame +
@@ -1622,6 +1624,10 @@ mod tests {
         assert!(arrived(&[300.5, 2.0], &[300.1, 2.01], Some(&[0.1, 0.001])));
     }
 
+    /// The next alternation's expected gain continues the last two as a geometric sequence:
+    /// after 25 % and 2.7 % (backlash + friction at 1x) it is below the 1 % an alternation must
+    /// take off, after 10 % and 5 % above; none is expected from the first alternation alone,
+    /// nor after one that took nothing off.
     #[test]
     fn the_next_alternation_is_expected_to_gain_as_the_last_two_did() {
         let threshold = 1.0 - FROM_DRAWING_GAIN;

@@ -756,17 +756,18 @@ pub(crate) fn search(
     blocks: &Blocks,
     w_phi: f64,
 ) -> RobotConfig {
-    refine(config, like, series, blocks, w_phi, SEARCH_ROWS, true)
+    search_with_errors(config, like, series, blocks, w_phi, Errors::No).0
 }
 
-/// [`search`] with the standard errors of the effects' parameters where it ended, approximate
-/// ([`Errors::Approximate`]); `None` as [`refine_with_errors`] gives it.
+/// [`search`] with the standard errors `errors` asks for ([`Errors::No`] or
+/// [`Errors::Approximate`]); `None` as [`refine_with_errors`] gives it.
 pub(crate) fn search_with_errors(
     config: &RobotConfig,
     like: &ExtendedModel,
     series: &[Series],
     blocks: &Blocks,
     w_phi: f64,
+    errors: Errors,
 ) -> (RobotConfig, Option<Vec<f64>>) {
     refine_with_errors(
         config,
@@ -777,7 +778,7 @@ pub(crate) fn search_with_errors(
         SEARCH_ROWS,
         true,
         MAX_EVALUATIONS,
-        Errors::Approximate,
+        errors,
     )
 }
 

@@ -80,7 +80,9 @@ struct PlayTerms {
 /// (where the play's output starts), and per run its input at its last row and whether it rises
 /// (a run of rows that hold their input rises).
 struct Runs {
+    /// The input at the series' first row, steps.
     first: f64,
+    /// Per run, the input at its last row (steps) and whether it rises.
     runs: Vec<(f64, bool)>,
     /// The index of its first run among every series' runs (of [`PlayTerms`]).
     offset: usize,
