@@ -139,6 +139,20 @@ impl FrictionState {
     pub fn joints(&self) -> [[f64; 2]; 3] {
         std::array::from_fn(|i| [self.d[2 * i], self.d[2 * i + 1]])
     }
+
+    /// How far the history `other` holds is from this one: the largest difference of an
+    /// element's anchor (rad for a joint, mm for a support) or of a tip's displacement (mm);
+    /// infinite where one of them has not started. What the rows after them are answered from
+    /// (the rest of a state only starts the next equilibrium's iteration).
+    pub fn difference(&self, other: &FrictionState) -> f64 {
+        let (Some(a), Some(b)) = (self.anchors, other.anchors) else {
+            return f64::INFINITY;
+        };
+        a.iter()
+            .zip(&b)
+            .chain(self.d.iter().zip(&other.d))
+            .fold(0.0, |m: f64, (x, y)| m.max((x - y).abs()))
+    }
 }
 
 /// The derivatives of a path's friction state by the fitted values (the joints' couple N mm, the
@@ -162,6 +176,23 @@ impl Default for FrictionTangent {
 }
 
 impl FrictionTangent {
+    /// How far the derivatives `other` holds are from these: per fitted value (their scales
+    /// differ: N mm, N, rad), the largest difference of a derivative of an anchor or of a tip's
+    /// displacement by it relative to the largest such derivative of either; the largest of
+    /// the three.
+    pub fn difference(&self, other: &FrictionTangent) -> f64 {
+        (0..3).fold(0.0, |m: f64, c| {
+            let (d0, d1) = (self.d.column(c), other.d.column(c));
+            let (a0, a1) = (self.a.column(c), other.a.column(c));
+            let diff = (d0 - d1).amax().max((a0 - a1).amax());
+            if diff == 0.0 {
+                return m;
+            }
+            let scale = d0.amax().max(d1.amax()).max(a0.amax()).max(a1.amax());
+            m.max(diff / scale)
+        })
+    }
+
     /// One row: the equilibrium `d` of `sl` with the anchors `a` (before they follow), its
     /// derivatives, and those of the anchors after the row.
     fn advance(&mut self, f: &Friction, sl: &SmallLoads, a: &VE, d: &VD, laws: AtEquilibrium) {
@@ -1402,6 +1433,38 @@ mod tests {
         let d2 = path(&r, &from_left, &double);
         let ratio = d2[d2.len() - 1][0] / dl[0];
         assert!((1.8..2.2).contains(&ratio), "{ratio}");
+    }
+
+    /// A history started later, from every element unloaded, becomes the history from the
+    /// start once the path has made every element slip: the elements forget what came before
+    /// ([`FrictionState::difference`], and the derivatives' [`FrictionTangent::difference`]).
+    /// Right after the later start, the two are far apart; a state has no difference with
+    /// itself, and one not started is infinitely far from any.
+    #[test]
+    fn a_history_started_later_forgets_that_it_did() {
+        let r = Robot::nominal();
+        let f = three_times();
+        let poses = lissajous(900, 0.02);
+        let step = |st: &mut FrictionState, tan: &mut FrictionTangent, p: &Pose| {
+            let kappa = r.ik(p).unwrap().kappa;
+            r.friction_step_tangent(&f, p, &kappa, st, tan).unwrap();
+        };
+        let (mut whole, mut whole_tan) = (FrictionState::default(), FrictionTangent::default());
+        let (mut late, mut late_tan) = (FrictionState::default(), FrictionTangent::default());
+        assert_eq!(whole.difference(&late), f64::INFINITY);
+        let mut after = Vec::new();
+        for (k, p) in poses.iter().enumerate() {
+            step(&mut whole, &mut whole_tan, p);
+            if k >= 300 {
+                step(&mut late, &mut late_tan, p);
+                after.push((whole.difference(&late), whole_tan.difference(&late_tan)));
+            }
+        }
+        assert_eq!(whole.difference(&whole), 0.0);
+        assert_eq!(whole_tan.difference(&whole_tan), 0.0);
+        let (first, last) = (after[0], after[after.len() - 1]);
+        assert!(first.0 > 1e-3 && first.1 > 1e-2, "{first:?}");
+        assert!(last.0 < 1e-9 && last.1 < 1e-6, "{last:?}");
     }
 
     /// The table of the segments' compliance is the quadrature's, on every leg, across the

@@ -138,33 +138,214 @@ pub struct Sensitivity {
     pub d_loads: [[f64; 3]; 5],
 }
 
+/// Rows of a series a friction pass answers in one piece at most ([`along_path`]): the pieces
+/// run in parallel, each from a history rebuilt over the configurations before it. A series of
+/// 44k rows is six pieces: the rebuilding costs 5 % more work in all (backlash + friction at
+/// 3x), and about twice that in pieces of 4096 rows.
+const PASS_CHUNK: usize = 8192;
+
+/// Configurations passed between rows (the stairs' steps, [`RigidPath::stairs`]) a piece of a
+/// friction pass runs through before its first row, from every element unloaded, to rebuild
+/// the history it starts from ([`along_path`]). On backlash + friction at 3x (39 passes, 5
+/// pieces after the first in each), the rebuilt history was the one the pass before it ended
+/// with, to [`SAME_HISTORY`] and [`SAME_DERIVATIVES`], in every piece at 500; at 350 one
+/// piece, at 250 15, at 150 76 were answered again.
+const BURN_IN_CONFIGURATIONS: usize = 500;
+
+/// A piece's rebuilt history is the one the pass before it ended with where the two differ by
+/// at most this ([`FrictionState::difference`]: mm for the tips and the supports' anchors, rad
+/// for the joints'): a tenth of what the equilibrium's iteration leaves at each row (1e-5 mm,
+/// [`pcr_kinematics::friction`]). On the recording above, histories rebuilt over 256 rows with
+/// a move differed from the pass's by 5e-14 in the median and 2e-7 at most.
+const SAME_HISTORY: f64 = 1e-6;
+
+/// The derivatives of a piece's rebuilt history ([`SAME_HISTORY`]) are those the pass before
+/// it ended with where each differs by less than this share of the largest derivative by the
+/// same value ([`pcr_kinematics::friction::FrictionTangent::difference`]): the direction of a
+/// linearised step, which the fit takes again from where it lands, changes by as much.
+const SAME_DERIVATIVES: f64 = 1e-4;
+
+/// Rows between the states a piece of a friction pass keeps ([`along_path`]): a piece answered
+/// again from the history the piece before ended with is answered so only until that history
+/// agrees with the piece's own at one of them. On friction at 10x (31 passes), 48 of the 119
+/// pieces after the first did not agree where they started, and each rejoined its own answers
+/// at its first or second checkpoint: 17k rows answered again in all, of 1.04 M.
+const CHECKPOINT: usize = 256;
+
+/// A friction pass's state: the history of the elements and, in a pass with the derivatives,
+/// theirs.
+trait PassState: Default + Clone + Send {
+    /// Whether `other` holds the same history as this one ([`SAME_HISTORY`],
+    /// [`SAME_DERIVATIVES`]).
+    fn agrees(&self, other: &Self) -> bool;
+}
+
+impl PassState for FrictionState {
+    fn agrees(&self, other: &Self) -> bool {
+        self.difference(other) <= SAME_HISTORY
+    }
+}
+
+impl PassState for (FrictionState, pcr_kinematics::friction::FrictionTangent) {
+    fn agrees(&self, other: &Self) -> bool {
+        self.0.agrees(&other.0) && self.1.difference(&other.1) <= SAME_DERIVATIVES
+    }
+}
+
 /// `step` along every row of a path in order, from every friction element unloaded at its
 /// first row; `None` where a row has no rigid pose (the elements stay as they were) or `step`
 /// has no answer.
 ///
 /// Before each row, the elements are taken through the configurations its legs' steps passed
 /// since the row before ([`RigidPath::stairs`]); only the row's own answer is kept.
-fn along_path<T>(
+///
+/// The rows are answered in pieces of equal length, at most [`PASS_CHUNK`], in parallel. A
+/// piece after the first rebuilds the history it starts from: from every element unloaded,
+/// through the rows before it that pass [`BURN_IN_CONFIGURATIONS`] configurations (a friction
+/// element's history is wiped where it slips, and the moves make every element slip). Then, in
+/// order, a piece's rebuilt history is compared with the one the piece before it ended with:
+/// where they differ by more than [`SAME_HISTORY`] (or [`SAME_DERIVATIVES`]), the piece is
+/// answered again from the latter, up to the first of its [`CHECKPOINT`]s where the two
+/// histories agree. The answer is that of one pass from the first row to within the
+/// equilibrium's own tolerance, and does not depend on the number of threads.
+fn along_path<S: PassState, T: Send>(
     rigid: &RigidPath,
     kappa: &[[f64; 3]],
-    mut step: impl FnMut(&Pose, &[f64; 3], &mut FrictionState, Passing) -> Option<T>,
+    step: impl Fn(&Pose, &[f64; 3], &mut S, Passing) -> Option<T> + Sync,
 ) -> Vec<Option<T>> {
-    let mut state = FrictionState::default();
-    rigid
-        .poses
-        .iter()
-        .zip(kappa)
-        .enumerate()
-        .map(|(k, (p, kap))| {
-            let p = p.as_ref()?;
-            if let Some(stair) = rigid.stairs.get(k) {
-                for (q, kq) in stair {
-                    let _ = step(q, kq, &mut state, Passing::Between);
+    along_path_in(rigid, kappa, Pieces::PASS, step).0
+}
+
+/// How [`along_path`] cuts a pass: pieces of at most `rows` rows, each rebuilding its history
+/// over `burn_in` configurations and keeping its state every `checkpoint` rows.
+#[derive(Debug, Clone, Copy)]
+struct Pieces {
+    rows: usize,
+    burn_in: usize,
+    checkpoint: usize,
+}
+
+impl Pieces {
+    /// [`PASS_CHUNK`], [`BURN_IN_CONFIGURATIONS`] and [`CHECKPOINT`].
+    const PASS: Pieces = Pieces {
+        rows: PASS_CHUNK,
+        burn_in: BURN_IN_CONFIGURATIONS,
+        checkpoint: CHECKPOINT,
+    };
+}
+
+/// One piece of a pass answered from its rebuilt history ([`along_path_in`]).
+struct Piece<S, T> {
+    /// Its rows.
+    rows: std::ops::Range<usize>,
+    /// The history rebuilt for it (none for the first piece).
+    rebuilt: Option<S>,
+    /// Its rows' answers.
+    out: Vec<Option<T>>,
+    /// The state before every `checkpoint`th row after its first.
+    checkpoints: Vec<S>,
+    /// The state after its last row.
+    end: S,
+}
+
+/// [`along_path`] in `pieces`, with the number of pieces answered again.
+fn along_path_in<S: PassState, T: Send>(
+    rigid: &RigidPath,
+    kappa: &[[f64; 3]],
+    pieces: Pieces,
+    step: impl Fn(&Pose, &[f64; 3], &mut S, Passing) -> Option<T> + Sync,
+) -> (Vec<Option<T>>, usize) {
+    let n = rigid.poses.len().min(kappa.len());
+    let run = |state: &mut S, rows: std::ops::Range<usize>, out: &mut Vec<Option<T>>| {
+        for k in rows {
+            let answer = rigid.poses[k].as_ref().and_then(|p| {
+                if let Some(stair) = rigid.stairs.get(k) {
+                    for (q, kq) in stair {
+                        let _ = step(q, kq, state, Passing::Between);
+                    }
                 }
+                step(p, &kappa[k], state, Passing::Row)
+            });
+            out.push(answer);
+        }
+    };
+    // The stretches of a piece between its checkpoints.
+    let every = pieces.checkpoint.max(1);
+    let stretches = |rows: std::ops::Range<usize>| {
+        let end = rows.end;
+        rows.step_by(every)
+            .map(move |k| k..k.saturating_add(every).min(end))
+    };
+    // Pieces of equal length, as many as pieces of `pieces.rows` take.
+    let size = n.div_ceil(n.div_ceil(pieces.rows.max(1)).max(1)).max(1);
+    let starts: Vec<usize> = (0..n).step_by(size).collect();
+    let answered: Vec<Piece<S, T>> = starts
+        .par_iter()
+        .map(|&first| {
+            let rows = first..(first + size).min(n);
+            let mut state = S::default();
+            let mut out = Vec::with_capacity(rows.len());
+            let rebuilt = (first > 0).then(|| {
+                run(&mut state, rigid.burn_in(first, pieces)..first, &mut out);
+                out.clear();
+                state.clone()
+            });
+            let mut checkpoints = Vec::new();
+            for stretch in stretches(rows.clone()) {
+                if stretch.start > first {
+                    checkpoints.push(state.clone());
+                }
+                run(&mut state, stretch, &mut out);
             }
-            step(p, kap, &mut state, Passing::Row)
+            Piece {
+                rows,
+                rebuilt,
+                out,
+                checkpoints,
+                end: state,
+            }
         })
-        .collect()
+        .collect();
+    let mut out = Vec::with_capacity(n);
+    let mut history: Option<S> = None;
+    let (mut again, mut rows_again) = (0, 0);
+    for mut piece in answered {
+        let mut before = match history.take() {
+            Some(b) if piece.rebuilt.as_ref().is_some_and(|r| !r.agrees(&b)) => b,
+            // The first piece, or one whose rebuilt history agrees.
+            _ => {
+                out.append(&mut piece.out);
+                history = Some(piece.end);
+                continue;
+            }
+        };
+        // Answered again from where the piece before ended, until the history agrees with the
+        // piece's own at one of its checkpoints: from there on, the piece's answers are the
+        // pass's.
+        again += 1;
+        let first = piece.rows.start;
+        for (j, stretch) in stretches(piece.rows.clone()).enumerate() {
+            let kept = j.checked_sub(1).and_then(|c| piece.checkpoints.get(c));
+            if kept.is_some_and(|c| before.agrees(c)) {
+                out.extend(piece.out.drain(stretch.start - first..));
+                history = Some(piece.end);
+                break;
+            }
+            rows_again += stretch.len();
+            run(&mut before, stretch, &mut out);
+        }
+        if history.is_none() {
+            history = Some(before);
+        }
+    }
+    tracing::debug!(
+        rows = n,
+        pieces = starts.len(),
+        again,
+        rows_again,
+        "friction pass in pieces"
+    );
+    (out, again)
 }
 
 /// Where [`along_path`] is: at a row (its answer kept) or passing a configuration on the stair
@@ -195,6 +376,30 @@ pub struct RigidPath {
     /// between the row before and this one, in order, the row's own excluded; empty at rest,
     /// at the first row and next to a row without a pose.
     pub stairs: Vec<Vec<(Pose, [f64; 3])>>,
+}
+
+impl RigidPath {
+    /// The first row of the history rebuilt for a piece of a friction pass starting at row
+    /// `first` ([`along_path`]): the last row before it at which the stairs from there to
+    /// `first` pass `pieces.burn_in` configurations ([`BURN_IN_CONFIGURATIONS`]), at most a
+    /// piece's rows before it, and at most the first row; `first` itself for none (the piece
+    /// starts from every element unloaded, which no history the pass had before agrees with).
+    fn burn_in(&self, first: usize, pieces: Pieces) -> usize {
+        if pieces.burn_in == 0 {
+            return first;
+        }
+        let earliest = first.saturating_sub(pieces.rows);
+        let mut passed = 0;
+        for k in (earliest..first).rev() {
+            if let Some(s) = self.stairs.get(k) {
+                passed += s.len();
+                if passed >= pieces.burn_in {
+                    return k;
+                }
+            }
+        }
+        earliest
+    }
 }
 
 /// A row's friction deflection (x mm, y mm, phi rad) and its derivatives by the friction's
@@ -665,25 +870,47 @@ impl ExtendedModel {
             tracing::debug!(rows = kappa.len(), "rigid path kept");
             return p;
         }
-        let mut guess = start_guess(s, 0);
-        let mut last: Option<([f64; 3], Pose)> = None;
-        let poses: Vec<Option<Pose>> = kappa
-            .iter()
-            .zip(&s.samples)
-            .map(|(k, smp)| {
-                if let Some((_, lp)) = last.filter(|(lk, _)| lk == k) {
-                    return Some(lp);
-                }
-                if let Some(p) = smp.pose {
-                    guess = Pose::new(p[0], p[1], p[2]);
-                }
-                let p = self.robot.fk_warm(k, &guess).ok()?;
-                guess = p;
-                last = Some((*k, p));
-                Some(p)
+        // In chunks of about PREDICT_CHUNK rows in parallel, each starting at a row that the
+        // pass from the first row solves from its own measured pose (its curvatures not the
+        // row before's): the same poses, to the bit, as that pass.
+        let n = kappa.len().min(s.samples.len());
+        let mut starts: Vec<usize> = (0..n)
+            .step_by(PREDICT_CHUNK)
+            .filter_map(|k0| {
+                (k0..n)
+                    .find(|&k| k == 0 || (kappa[k] != kappa[k - 1] && s.samples[k].pose.is_some()))
             })
             .collect();
+        starts.dedup();
+        let ends: Vec<usize> = starts.iter().skip(1).copied().chain([n]).collect();
+        let poses: Vec<Option<Pose>> = starts
+            .par_iter()
+            .zip(&ends)
+            .map(|(&k0, &k1)| {
+                let mut guess = start_guess(s, k0);
+                let mut last: Option<([f64; 3], Pose)> = None;
+                let rows = k0..k1;
+                kappa[rows.clone()]
+                    .iter()
+                    .zip(&s.samples[rows])
+                    .map(|(k, smp)| {
+                        if let Some((_, lp)) = last.filter(|(lk, _)| lk == k) {
+                            return Some(lp);
+                        }
+                        if let Some(p) = smp.pose {
+                            guess = Pose::new(p[0], p[1], p[2]);
+                        }
+                        let p = self.robot.fk_warm(k, &guess).ok()?;
+                        guess = p;
+                        last = Some((*k, p));
+                        Some(p)
+                    })
+                    .collect::<Vec<_>>()
+            })
+            .flatten_iter()
+            .collect();
         let stairs = (0..poses.len())
+            .into_par_iter()
             .map(|k| {
                 let (Some(prev), Some(_)) = (k.checked_sub(1).and_then(|j| poses[j]), poses[k])
                 else {
@@ -800,13 +1027,9 @@ impl ExtendedModel {
             return rows;
         }
         let rows = std::sync::Arc::new(if tangent {
-            let mut tan = pcr_kinematics::friction::FrictionTangent::default();
-            along_path(rigid, kappa, |p, k, state, at| match at {
+            along_path(rigid, kappa, |p, k, (state, tan), at| match at {
                 Passing::Row => {
-                    let (d, t) = self
-                        .robot
-                        .friction_step_tangent(f, p, k, state, &mut tan)
-                        .ok()?;
+                    let (d, t) = self.robot.friction_step_tangent(f, p, k, state, tan).ok()?;
                     Some(PassRow {
                         d,
                         t,
@@ -814,7 +1037,7 @@ impl ExtendedModel {
                     })
                 }
                 Passing::Between => {
-                    let _ = self.robot.friction_pass(f, p, k, state, Some(&mut tan));
+                    let _ = self.robot.friction_pass(f, p, k, state, Some(tan));
                     None
                 }
             })
@@ -1549,6 +1772,136 @@ mod tests {
     /// A series of `n` rows 20 ms apart whose motors swing about home by `amplitude` steps
     /// (motor i at `rate` t + `phase` i rad), rounded to whole steps, each row with a measured
     /// pose.
+    /// A friction pass in pieces is the pass in one from the first row: with its history
+    /// rebuilt over the configurations before each piece, every piece agrees with the end of the
+    /// one before and the deflections and their derivatives are the one pass's to well within
+    /// the equilibrium's tolerance; with no history rebuilt, no piece agrees and each is
+    /// answered again from where the one before ended: to its end, the one pass to the bit, or
+    /// up to the checkpoint where it rejoins its own answers, the one pass to the tolerance.
+    /// The answer does not depend on the number of threads.
+    #[test]
+    fn a_friction_pass_in_pieces_is_the_pass_in_one() {
+        let cfg = rubbing();
+        let s = swinging(&cfg, 1500, 80.0, 1.1, 0.9);
+        let m = ExtendedModel::new(&cfg, crate::effects::chain()).unwrap();
+        let f = m.friction.unwrap();
+        let kappa: Vec<[f64; 3]> = m.predict(&s).iter().map(|p| p.kappa).collect();
+        let rigid = m.rigid_path(&s, &kappa);
+        type WithTangent = (FrictionState, pcr_kinematics::friction::FrictionTangent);
+        let pass = |pieces: Pieces| {
+            along_path_in(
+                &rigid,
+                &kappa,
+                pieces,
+                |p, k, (state, tan): &mut WithTangent, at| match at {
+                    Passing::Row => m.robot.friction_step_tangent(&f, p, k, state, tan).ok(),
+                    Passing::Between => {
+                        let _ = m.robot.friction_pass(&f, p, k, state, Some(tan));
+                        None
+                    }
+                },
+            )
+        };
+        let (one, again) = pass(Pieces {
+            rows: usize::MAX,
+            burn_in: 500,
+            checkpoint: usize::MAX,
+        });
+        assert_eq!(again, 0);
+        let near = |a: &[Option<DeflectionTangent>], b: &[Option<DeflectionTangent>]| {
+            let (mut deflection, mut derivative) = (0.0_f64, 0.0_f64);
+            for (a, b) in a.iter().zip(b) {
+                let ((da, ta), (db, tb)) = (a.unwrap(), b.unwrap());
+                for c in 0..3 {
+                    deflection = deflection.max((da[c] - db[c]).abs());
+                    for j in 0..3 {
+                        let scale = ta[c][j].abs().max(1e-9);
+                        derivative = derivative.max((ta[c][j] - tb[c][j]).abs() / scale);
+                    }
+                }
+            }
+            assert!(deflection < 1e-6, "deflections differ by {deflection:e}");
+            assert!(
+                derivative < 1e-3,
+                "derivatives differ by {derivative:e} of themselves"
+            );
+        };
+        let rebuilt = Pieces {
+            rows: 300,
+            burn_in: 500,
+            checkpoint: 64,
+        };
+        let (pieces, again) = pass(rebuilt);
+        assert_eq!(again, 0, "every rebuilt history agrees");
+        assert_eq!(pieces.len(), one.len());
+        near(&one, &pieces);
+        // Not rebuilt: every piece after the first is answered again, to its end without
+        // checkpoints (the one pass, to the bit), or until it rejoins its own answers.
+        let (redone, again) = pass(Pieces {
+            rows: 300,
+            burn_in: 0,
+            checkpoint: usize::MAX,
+        });
+        assert_eq!(again, 4, "no piece after the first agrees");
+        assert_eq!(redone, one);
+        let (rejoined, again) = pass(Pieces {
+            rows: 300,
+            burn_in: 0,
+            checkpoint: 64,
+        });
+        assert_eq!(again, 4);
+        assert_ne!(rejoined, one, "the pieces' own answers after they rejoined");
+        near(&one, &rejoined);
+        let threads = |n: usize| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(n)
+                .build()
+                .unwrap()
+                .install(|| pass(rebuilt).0)
+        };
+        assert_eq!(threads(1), pieces);
+        assert_eq!(threads(3), pieces);
+    }
+
+    /// The rigid path, solved in chunks in parallel, is the path solved row after row from the
+    /// first, to the bit.
+    #[test]
+    fn the_rigid_path_in_chunks_is_the_path_in_one() {
+        let cfg = RobotConfig::nominal();
+        let mut s = swinging(&cfg, 2 * PREDICT_CHUNK + 300, 80.0, 1.1, 0.9);
+        // Rows at rest (the same curvatures) and rows without a measured pose across the
+        // chunks' first rows.
+        for k in [PREDICT_CHUNK - 1, PREDICT_CHUNK, PREDICT_CHUNK + 1] {
+            s.samples[k].q = s.samples[k - 1].q;
+        }
+        for k in (2 * PREDICT_CHUNK - 3)..(2 * PREDICT_CHUNK + 3) {
+            s.samples[k].pose = None;
+        }
+        let m = ExtendedModel::new(&cfg, crate::effects::chain()).unwrap();
+        let kappa = m.curvatures(&s, &(0..s.samples.len()).collect::<Vec<_>>());
+        let chunked = m.rigid_path(&s, &kappa);
+        let mut guess = start_guess(&s, 0);
+        let mut last: Option<([f64; 3], Pose)> = None;
+        let one: Vec<Option<Pose>> = kappa
+            .iter()
+            .zip(&s.samples)
+            .map(|(k, smp)| {
+                if let Some((_, lp)) = last.filter(|(lk, _)| lk == k) {
+                    return Some(lp);
+                }
+                if let Some(p) = smp.pose {
+                    guess = Pose::new(p[0], p[1], p[2]);
+                }
+                let p = m.robot.fk_warm(k, &guess).ok()?;
+                guess = p;
+                last = Some((*k, p));
+                Some(p)
+            })
+            .collect();
+        assert!(one.iter().all(Option::is_some));
+        assert_eq!(chunked.poses, one);
+    }
+
     fn swinging(cfg: &RobotConfig, n: usize, amplitude: f64, rate: f64, phase: f64) -> Series {
         let home = Robot::new(cfg).unwrap().home_motor_steps();
         let mut rec = pcr_recording::Recording::default();
