@@ -17,7 +17,8 @@ plant seed it
   4. runs `pcr residuals --data cal.csv --holdout holdout.csv --json ...` on both conventions,
      pinned to one core (`taskset -c`), timing wall and cpu (and once more on two cores for the
      chain's convention of the first seed); with several jobs, a run over the time budget is
-     timed again at the end, alone, pinned, with the other cores idle;
+     timed again at the end, alone, pinned, with the other cores idle, and the two-core runs
+     are made at the end too, one at a time;
   5. compares what was named with the truth: per parameter the estimate, its stated standard
      error, |est - truth| / std; the held-out RMS after the analysis against the floor, the
      held-out RMS of the noisy holdout against its noise-free twin (the capture noise as it fell
@@ -413,6 +414,7 @@ class Sweep:
         self.lock = threading.Lock()
         self.factors = {}   # case id -> {effect: factor used}
         self.notes = {}     # case id -> why the factor differs from the case's
+        self.two_core_cmds = {}  # (case id, seed) -> the chain analysis, timed on two cores last
         self.done = 0
 
     def say(self, msg):
@@ -485,10 +487,15 @@ class Sweep:
                 js.unlink(missing_ok=True)
                 rc, wall, cpu, peak = run_timed(cmd, d, log, core)
                 t = {"rc": rc, "wall_s": wall, "cpu_s": cpu, "peak_mib": peak, "wall2_s": None}
-                if rc == 0 and two_cores and conv == "chain":
+                # With one job, nothing else runs: the two-core time is taken here; with more,
+                # after every analysis, one case at a time (`Sweep.time_two_cores`).
+                if rc == 0 and two_cores and conv == "chain" and self.a.jobs == 1:
                     rc2, wall2, _, _ = run_timed(cmd, d, log, None)
                     t["wall2_s"] = wall2 if rc2 == 0 else None
                 (d / ("time-%s.json" % conv)).write_text(json.dumps(t))
+            if two_cores and conv == "chain" and self.a.jobs > 1 and t["rc"] == 0:
+                with self.lock:
+                    self.two_core_cmds[(case.id, seed)] = (cmd, d, log)
             res = json.loads(js.read_text()) if t["rc"] == 0 and js.exists() else None
             runs.append(evaluate(case, seed, conv, self.factors[case.id], res, t, floor,
                                  [data_rows(d / ("cal%s.csv" % suffix)),
@@ -560,6 +567,31 @@ class Sweep:
                     runs.extend(f.result())
         if self.a.jobs > 1 and self.a.time_budget_s > 0:
             runs = self.retime_alone(case_list, runs)
+        if self.two_core_cmds:
+            runs = self.time_two_cores(runs)
+        return runs
+
+    def time_two_cores(self, runs):
+        """Times the chain convention of each case's first seed on every core (unpinned), one
+        case at a time, after the sweep's analyses: beside another job, as it was timed before,
+        the second core was the other job's. With --reuse nothing is timed: the times stored
+        stand."""
+        todo = []
+        for (cid, seed), (cmd, d, log) in self.two_core_cmds.items():
+            t = json.loads((d / "time-chain.json").read_text())
+            if not self.a.reuse and (t.get("wall2_s") is None or not t.get("wall2_alone")):
+                todo.append((cid, seed, cmd, d, log, t))
+        if todo:
+            self.say("timing %d case(s) on two cores, one at a time" % len(todo))
+        for cid, seed, cmd, d, log, t in todo:
+            rc, wall2, _, _ = run_timed(cmd, d, log, None)
+            t["wall2_s"], t["wall2_alone"] = (wall2 if rc == 0 else None), True
+            (d / "time-chain.json").write_text(json.dumps(t))
+        walls = {(cid, seed): json.loads((d / "time-chain.json").read_text()).get("wall2_s")
+                 for (cid, seed), (_, d, _) in self.two_core_cmds.items()}
+        for r in runs:
+            if r["convention"] == "chain" and (r["case"], r["seed"]) in walls:
+                r["wall2_s"] = walls[(r["case"], r["seed"])]
         return runs
 
     def retime_alone(self, case_list, runs):
@@ -868,7 +900,8 @@ def markdown(case_list, runs, aggs, limits, args, meta):
              "<= 2 stated std. Times: `pcr residuals` (calibration + analysis) pinned to one core "
              "(`taskset`), wall, beside another job when the sweep runs two at a time; [cpu alone]: a run "
              "over the time budget timed again pinned with the other cores idle (the time rule "
-             "reads it); two cores: the chain convention of the first seed, unpinned. Bias and "
+             "reads it); two cores: the chain convention of the first seed, unpinned, alone (after "
+             "the other analyses when the sweep runs two at a time). Bias and "
              "spread of a parameter: over the seeds, chain convention; conventions agree: seeds "
              "where both name the same effects, and the largest difference of a parameter "
              "between them in its stated std.\n")
