@@ -886,27 +886,7 @@ impl ExtendedModel {
         let poses: Vec<Option<Pose>> = starts
             .par_iter()
             .zip(&ends)
-            .map(|(&k0, &k1)| {
-                let mut guess = start_guess(s, k0);
-                let mut last: Option<([f64; 3], Pose)> = None;
-                let rows = k0..k1;
-                kappa[rows.clone()]
-                    .iter()
-                    .zip(&s.samples[rows])
-                    .map(|(k, smp)| {
-                        if let Some((_, lp)) = last.filter(|(lk, _)| lk == k) {
-                            return Some(lp);
-                        }
-                        if let Some(p) = smp.pose {
-                            guess = Pose::new(p[0], p[1], p[2]);
-                        }
-                        let p = self.robot.fk_warm(k, &guess).ok()?;
-                        guess = p;
-                        last = Some((*k, p));
-                        Some(p)
-                    })
-                    .collect::<Vec<_>>()
-            })
+            .map(|(&k0, &k1)| self.rigid_poses(s, kappa, k0..k1))
             .flatten_iter()
             .collect();
         let stairs = (0..poses.len())
@@ -922,6 +902,36 @@ impl ExtendedModel {
         let path = std::sync::Arc::new(RigidPath { poses, stairs });
         kept::keep_rigid(&self.config, s, kappa, &q_eff, path.clone());
         path
+    }
+
+    /// The rigid poses of the rows `rows` of a series at the curvatures `kappa` (all the
+    /// series'), solved in order from the last measured pose at or before the first: each row
+    /// from its own measured pose, or from the row before's answer where it has none; a row at
+    /// the curvatures of the row before takes its pose.
+    fn rigid_poses(
+        &self,
+        s: &Series,
+        kappa: &[[f64; 3]],
+        rows: std::ops::Range<usize>,
+    ) -> Vec<Option<Pose>> {
+        let mut guess = start_guess(s, rows.start);
+        let mut last: Option<([f64; 3], Pose)> = None;
+        kappa[rows.clone()]
+            .iter()
+            .zip(&s.samples[rows])
+            .map(|(k, smp)| {
+                if let Some((_, lp)) = last.filter(|(lk, _)| lk == k) {
+                    return Some(lp);
+                }
+                if let Some(p) = smp.pose {
+                    guess = Pose::new(p[0], p[1], p[2]);
+                }
+                let p = self.robot.fk_warm(k, &guess).ok()?;
+                guess = p;
+                last = Some((*k, p));
+                Some(p)
+            })
+            .collect()
     }
 
     /// The configurations between two rows (pose `p0` at curvatures `k0` and motor positions
@@ -1723,17 +1733,32 @@ mod tests {
         assert!(moved > 100, "{moved} rows deflected by the friction");
     }
 
+    /// A swinging series of `n` rows under [`rubbing`]'s friction: the model, its friction, the
+    /// rows' curvatures and the rigid path.
+    fn rubbing_path(
+        n: usize,
+    ) -> (
+        Series,
+        ExtendedModel,
+        Friction,
+        Vec<[f64; 3]>,
+        std::sync::Arc<RigidPath>,
+    ) {
+        let cfg = rubbing();
+        let s = swinging(&cfg, n, 80.0, 1.1, 0.9);
+        let m = ExtendedModel::new(&cfg, crate::effects::chain()).unwrap();
+        let f = m.friction.unwrap();
+        let kappa: Vec<[f64; 3]> = m.predict(&s).iter().map(|p| p.kappa).collect();
+        let rigid = m.rigid_path(&s, &kappa);
+        (s, m, f, kappa, rigid)
+    }
+
     /// A friction pass given again from the kept ones ([`kept`]) is the pass made afresh, to the
     /// bit; one without the derivatives does not answer one with them; another friction is
     /// another pass; and a prediction made with the derivatives predicts what one without does.
     #[test]
     fn a_kept_friction_pass_is_the_pass_made_again() {
-        let cfg = rubbing();
-        let s = swinging(&cfg, 300, 80.0, 1.1, 0.9);
-        let m = ExtendedModel::new(&cfg, crate::effects::chain()).unwrap();
-        let f = m.friction.unwrap();
-        let kappa: Vec<[f64; 3]> = m.predict(&s).iter().map(|p| p.kappa).collect();
-        let rigid = m.rigid_path(&s, &kappa);
+        let (s, m, f, kappa, rigid) = rubbing_path(300);
         assert_eq!(m.rigid_path(&s, &kappa).poses, rigid.poses);
         forget_kept();
         let plain = m.friction_path(&rigid, &kappa, &f);
@@ -1781,12 +1806,7 @@ mod tests {
     /// The answer does not depend on the number of threads.
     #[test]
     fn a_friction_pass_in_pieces_is_the_pass_in_one() {
-        let cfg = rubbing();
-        let s = swinging(&cfg, 1500, 80.0, 1.1, 0.9);
-        let m = ExtendedModel::new(&cfg, crate::effects::chain()).unwrap();
-        let f = m.friction.unwrap();
-        let kappa: Vec<[f64; 3]> = m.predict(&s).iter().map(|p| p.kappa).collect();
-        let rigid = m.rigid_path(&s, &kappa);
+        let (_, m, f, kappa, rigid) = rubbing_path(1500);
         type WithTangent = (FrictionState, pcr_kinematics::friction::FrictionTangent);
         let pass = |pieces: Pieces| {
             along_path_in(
@@ -1864,7 +1884,7 @@ mod tests {
     }
 
     /// The rigid path, solved in chunks in parallel, is the path solved row after row from the
-    /// first, to the bit.
+    /// first ([`ExtendedModel::rigid_poses`] over every row), to the bit.
     #[test]
     fn the_rigid_path_in_chunks_is_the_path_in_one() {
         let cfg = RobotConfig::nominal();
@@ -1880,24 +1900,7 @@ mod tests {
         let m = ExtendedModel::new(&cfg, crate::effects::chain()).unwrap();
         let kappa = m.curvatures(&s, &(0..s.samples.len()).collect::<Vec<_>>());
         let chunked = m.rigid_path(&s, &kappa);
-        let mut guess = start_guess(&s, 0);
-        let mut last: Option<([f64; 3], Pose)> = None;
-        let one: Vec<Option<Pose>> = kappa
-            .iter()
-            .zip(&s.samples)
-            .map(|(k, smp)| {
-                if let Some((_, lp)) = last.filter(|(lk, _)| lk == k) {
-                    return Some(lp);
-                }
-                if let Some(p) = smp.pose {
-                    guess = Pose::new(p[0], p[1], p[2]);
-                }
-                let p = m.robot.fk_warm(k, &guess).ok()?;
-                guess = p;
-                last = Some((*k, p));
-                Some(p)
-            })
-            .collect();
+        let one = m.rigid_poses(&s, &kappa, 0..s.samples.len());
         assert!(one.iter().all(Option::is_some));
         assert_eq!(chunked.poses, one);
     }
