@@ -37,12 +37,24 @@ pub fn check_options(block_s: f64, alpha: f64, candidates: &[String]) -> Result<
 /// A recording with the name it is reported by.
 pub type Named = (Recording, String);
 
-/// Reads recordings from files.
+/// Reads recordings from files, each on its own thread (a 44k-row calibration recording takes
+/// some 50 ms, its holdout 20 ms: the analysis read them one after the other on one core); the
+/// first file in `paths` that cannot be read is the error.
 pub fn read_all(paths: &[std::path::PathBuf]) -> Result<Vec<Named>, OfflineError> {
-    paths
-        .iter()
-        .map(|p| Ok((Recording::read_path(p)?, p.display().to_string())))
-        .collect()
+    std::thread::scope(|s| {
+        let reading: Vec<_> = paths
+            .iter()
+            .map(|p| s.spawn(move || Recording::read_path(p)))
+            .collect();
+        reading
+            .into_iter()
+            .zip(paths)
+            .map(|(r, p)| {
+                let rec = r.join().unwrap_or_else(|e| std::panic::resume_unwind(e))?;
+                Ok((rec, p.display().to_string()))
+            })
+            .collect()
+    })
 }
 
 /// The analysis ready to attribute.

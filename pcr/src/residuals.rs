@@ -83,8 +83,10 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let start = load_robot(a.robot.as_deref())?;
     let drawing = start.clone();
     progress.sink.stage(0, "reading the recordings", 0, 0);
-    let data = residuals_run::read_all(&a.data)?;
-    let holdout = residuals_run::read_all(&a.holdout)?;
+    // Every recording at once, the data's first.
+    let paths: Vec<std::path::PathBuf> = a.data.iter().chain(&a.holdout).cloned().collect();
+    let mut data = residuals_run::read_all(&paths)?;
+    let holdout = data.split_off(a.data.len());
     if !a.no_calibrate {
         progress
             .sink

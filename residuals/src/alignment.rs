@@ -20,6 +20,7 @@ use crate::context::Context;
 use crate::effects::latency;
 use crate::linear::motor_delta;
 use crate::series::Series;
+use rayon::prelude::*;
 use serde::Serialize;
 
 /// What the data say about a recording's declared delay.
@@ -101,6 +102,7 @@ const ALPHA: f64 = 0.01;
 /// against its declaration.
 pub fn align(ctx: &Context) -> Vec<Timing> {
     (0..ctx.series.len())
+        .into_par_iter()
         .map(|s| align_series(ctx, s))
         .collect()
 }
@@ -168,7 +170,8 @@ fn align_series(ctx: &Context, si: usize) -> Timing {
         );
         return out;
     }
-    // Coarse scan of the total SSE, then a finer one around its minimum.
+    // Coarse scan of the total SSE, then a finer one around its minimum; the delays of a scan
+    // in parallel (it ran on one core before the candidates' first round).
     let lo = (-SCAN_BEFORE).min(declared - SCAN_BEFORE);
     let n = ((declared + SCAN_AFTER - lo) / SCAN_STEP).round() as usize;
     let total_at = |d: f64| -> f64 {
@@ -183,6 +186,7 @@ fn align_series(ctx: &Context, si: usize) -> Timing {
     };
     let coarse = argmin(
         (0..=n)
+            .into_par_iter()
             .map(|k| {
                 let d = lo + k as f64 * SCAN_STEP;
                 (d, total_at(d))
@@ -192,6 +196,7 @@ fn align_series(ctx: &Context, si: usize) -> Timing {
     );
     let best = argmin(
         (-4..=4)
+            .into_par_iter()
             .map(|k| {
                 let d = coarse + f64::from(k) * SCAN_STEP / 4.0;
                 (d, total_at(d))
@@ -205,7 +210,7 @@ fn align_series(ctx: &Context, si: usize) -> Timing {
         .map(|k| best - FINE_HALF + k as f64 * FINE_STEP)
         .collect();
     let table: Vec<Vec<f64>> = grid
-        .iter()
+        .par_iter()
         .map(|d| per_block_sse(ctx, si, &rows, d - delay_now, &blocks, None))
         .collect();
     let total: Vec<f64> = table.iter().map(|b| b.iter().sum()).collect();

@@ -505,119 +505,129 @@ impl Refit<'_> {
             .collect();
         let springs = model.loads.is_some_and(|l| l.k_m != 0.0 || l.k_p != 0.0);
         let rest = springs.then(|| model.robot.home_joint_angles());
-        let eps = f64::EPSILON.sqrt();
+        // Every column that the responses or the friction's linearisation give, in parallel
+        // (each reads the model at `x` and builds its own at its step: on two cores the
+        // refinements were the analysis's longest stretch on one, backlash + friction at 3x,
+        // each parameter that moves the curvatures taking the tendons of every row of the
+        // recording); `None`: the parameter needs the full model's forward difference, made
+        // after, in order, since those evaluations keep their rows' loaded states.
+        let cols: Vec<Option<Vec<f64>>> = (0..x.len())
+            .into_par_iter()
+            .map(|p| self.response_column(p, x, upper, &model, &sens, rest))
+            .collect::<Result<_, String>>()?;
         let mut xp = x.to_vec();
         let mut fd_base: Option<Vec<f64>> = None;
-        for p in 0..x.len() {
-            if let Some((fr, j0)) = self
-                .friction
-                .as_ref()
-                .and_then(|f| f.column(p).map(|j0| (f, j0)))
-            {
-                // The linearised deflection's own column: its derivative, in the residual's
-                // sign (measured less predicted).
-                let mut k = 0;
-                for (si, rows) in self.rows.iter().enumerate() {
-                    for (r, &i) in rows.iter().enumerate() {
-                        let col = match self.series[si].samples[i].pose {
-                            Some(_) => {
-                                let d = fr.rows[si][r].1[j0];
-                                [-d[0], -d[1], -self.w_phi * d[2]]
-                            }
-                            None => [0.0; 3],
-                        };
-                        for c in 0..3 {
-                            j[(3 * k + c, p)] = col[c];
-                        }
-                        k += 1;
-                    }
-                }
+        for (p, col) in cols.into_iter().enumerate() {
+            if let Some(col) = col {
+                j.column_mut(p).rows_mut(0, col.len()).copy_from_slice(&col);
                 continue;
             }
-            let mut h = eps * x[p].abs().max(1.0);
-            if x[p] + h > upper[p] {
-                h = -h;
-            }
+            let h = step(x[p], upper[p]);
             xp[p] = x[p] + h;
             let h = xp[p] - x[p];
-            let mk = self.effects_model(&xp)?;
-            let dloads = match (&model.loads, &mk.loads) {
-                // The friction's deflection is not among the kinematics' responses.
-                _ if model.friction != mk.friction => None,
-                (None, None) => Some([0.0; 5]),
-                (Some(a), Some(b))
-                    if a.ei == b.ei && rest.is_none_or(|r| r == mk.robot.home_joint_angles()) =>
-                {
-                    Some([
-                        b.force[0] - a.force[0],
-                        b.force[1] - a.force[1],
-                        b.couple - a.couple,
-                        b.k_m - a.k_m,
-                        b.k_p - a.k_p,
-                    ])
-                }
-                _ => None,
-            };
-            match dloads {
-                Some(dl) => {
-                    let secant = self
-                        .friction
-                        .as_ref()
-                        .and_then(|f| f.path_column(p).map(|c| (f, c)));
-                    let mut k = 0;
-                    for (si, ((s, rows), sens)) in
-                        self.series.iter().zip(&self.rows).zip(&sens).enumerate()
-                    {
-                        // A load or the frame leaves the curvatures where they are at `x`.
-                        let moved = self.slots[p]
-                            .moves_curvatures
-                            .then(|| mk.curvatures(s, rows));
-                        for (r, (&i, sn)) in rows.iter().zip(sens).enumerate() {
-                            let col = match (s.samples[i].pose, sn) {
-                                (Some(m), Some(sn)) => {
-                                    let (m0, m1) = (model.corrected(m), mk.corrected(m));
-                                    let kappa = moved.as_ref().map_or(sn.kappa, |c| c[r]);
-                                    let dk = nalgebra::Vector3::from(std::array::from_fn(|l| {
-                                        kappa[l] - sn.kappa[l]
-                                    }));
-                                    let mut dp = sn.d_kappa * dk;
-                                    for (c, d) in sn.d_loads.iter().zip(&dl) {
-                                        dp += nalgebra::Vector3::from(*c) * *d;
-                                    }
-                                    // The friction's secant along the path, if any.
-                                    let g = secant.map_or([0.0; 3], |(fr, c)| fr.path[si][r][c]);
-                                    [
-                                        (m1[0] - m0[0] - dp[0]) / h - g[0],
-                                        (m1[1] - m0[1] - dp[1]) / h - g[1],
-                                        self.w_phi * ((wrap(m1[2] - m0[2]) - dp[2]) / h - g[2]),
-                                    ]
-                                }
-                                _ => [0.0; 3],
-                            };
-                            for c in 0..3 {
-                                j[(3 * k + c, p)] = col[c];
-                            }
-                            k += 1;
-                        }
-                    }
-                }
-                None => {
-                    if fd_base.is_none() {
-                        let mut b = vec![0.0; 3 * self.n];
-                        self.effect_residuals(x, &mut b)?;
-                        fd_base = Some(b);
-                    }
-                    let base = fd_base.as_deref().unwrap_or_default();
-                    let mut rp = vec![0.0; 3 * self.n];
-                    self.effect_residuals(&xp, &mut rp)?;
-                    for i in 0..3 * self.n {
-                        j[(i, p)] = (rp[i] - base[i]) / h;
-                    }
-                }
+            if fd_base.is_none() {
+                let mut b = vec![0.0; 3 * self.n];
+                self.effect_residuals(x, &mut b)?;
+                fd_base = Some(b);
+            }
+            let base = fd_base.as_deref().unwrap_or_default();
+            let mut rp = vec![0.0; 3 * self.n];
+            self.effect_residuals(&xp, &mut rp)?;
+            for i in 0..3 * self.n {
+                j[(i, p)] = (rp[i] - base[i]) / h;
             }
             xp[p] = x[p];
         }
         Ok(())
+    }
+
+    /// Parameter `p`'s column of [`Refit::effect_columns`] (3 n entries) where it needs no
+    /// evaluation of the full model: the friction's linearised deflection's own derivative, or
+    /// the forward difference through the cheap stages times the kinematics' responses `sens`
+    /// at `x` (`model`: the model at `x`; `rest`: its springs' rest angles, if it has springs).
+    /// `None`: the full model's forward difference is needed.
+    fn response_column(
+        &self,
+        p: usize,
+        x: &[f64],
+        upper: &[f64],
+        model: &ExtendedModel,
+        sens: &[Vec<Option<Sensitivity>>],
+        rest: Option<[(f64, f64); 3]>,
+    ) -> Result<Option<Vec<f64>>, String> {
+        let mut out = vec![0.0; 3 * self.n];
+        if let Some((fr, j0)) = self
+            .friction
+            .as_ref()
+            .and_then(|f| f.column(p).map(|j0| (f, j0)))
+        {
+            // The linearised deflection's own column: its derivative, in the residual's
+            // sign (measured less predicted).
+            let mut k = 0;
+            for (si, rows) in self.rows.iter().enumerate() {
+                for (r, &i) in rows.iter().enumerate() {
+                    if self.series[si].samples[i].pose.is_some() {
+                        let d = fr.rows[si][r].1[j0];
+                        out[3 * k..3 * k + 3].copy_from_slice(&[-d[0], -d[1], -self.w_phi * d[2]]);
+                    }
+                    k += 1;
+                }
+            }
+            return Ok(Some(out));
+        }
+        let mut xp = x.to_vec();
+        xp[p] = x[p] + step(x[p], upper[p]);
+        let h = xp[p] - x[p];
+        let mk = self.effects_model(&xp)?;
+        let dl = match (&model.loads, &mk.loads) {
+            // The friction's deflection is not among the kinematics' responses.
+            _ if model.friction != mk.friction => return Ok(None),
+            (None, None) => [0.0; 5],
+            (Some(a), Some(b))
+                if a.ei == b.ei && rest.is_none_or(|r| r == mk.robot.home_joint_angles()) =>
+            {
+                [
+                    b.force[0] - a.force[0],
+                    b.force[1] - a.force[1],
+                    b.couple - a.couple,
+                    b.k_m - a.k_m,
+                    b.k_p - a.k_p,
+                ]
+            }
+            _ => return Ok(None),
+        };
+        let secant = self
+            .friction
+            .as_ref()
+            .and_then(|f| f.path_column(p).map(|c| (f, c)));
+        let mut k = 0;
+        for (si, ((s, rows), sens)) in self.series.iter().zip(&self.rows).zip(sens).enumerate() {
+            // A load or the frame leaves the curvatures where they are at `x`.
+            let moved = self.slots[p]
+                .moves_curvatures
+                .then(|| mk.curvatures(s, rows));
+            for (r, (&i, sn)) in rows.iter().zip(sens).enumerate() {
+                if let (Some(m), Some(sn)) = (s.samples[i].pose, sn) {
+                    let (m0, m1) = (model.corrected(m), mk.corrected(m));
+                    let kappa = moved.as_ref().map_or(sn.kappa, |c| c[r]);
+                    let dk =
+                        nalgebra::Vector3::from(std::array::from_fn(|l| kappa[l] - sn.kappa[l]));
+                    let mut dp = sn.d_kappa * dk;
+                    for (c, d) in sn.d_loads.iter().zip(&dl) {
+                        dp += nalgebra::Vector3::from(*c) * *d;
+                    }
+                    // The friction's secant along the path, if any.
+                    let g = secant.map_or([0.0; 3], |(fr, c)| fr.path[si][r][c]);
+                    out[3 * k..3 * k + 3].copy_from_slice(&[
+                        (m1[0] - m0[0] - dp[0]) / h - g[0],
+                        (m1[1] - m0[1] - dp[1]) / h - g[1],
+                        self.w_phi * ((wrap(m1[2] - m0[2]) - dp[2]) / h - g[2]),
+                    ]);
+                }
+                k += 1;
+            }
+        }
+        Ok(Some(out))
     }
 
     /// The full model's residuals with the effects at `x` (calibration parameters as in
@@ -717,6 +727,17 @@ impl Problem for Refit<'_> {
             j[(3 * self.n + gj, ne + gj)] = l.prior_sqrt[gj];
         }
         Ok(())
+    }
+}
+
+/// The forward-difference step of a parameter at `x` with upper bound `upper` (backwards
+/// where forwards would cross it).
+fn step(x: f64, upper: f64) -> f64 {
+    let h = f64::EPSILON.sqrt() * x.abs().max(1.0);
+    if x + h > upper {
+        -h
+    } else {
+        h
     }
 }
 

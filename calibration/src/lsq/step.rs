@@ -108,29 +108,69 @@ type SvdParts = (DVector<f64>, DVector<f64>, DMatrix<f64>);
 /// and its results to the last digit.
 const QR_FIRST_ROWS: usize = 1024;
 
+/// Rows of a block of [`tall_qr`]: a block's reflections stay in the cache (2048 rows of 30
+/// columns are half a megabyte), and the blocks are reduced in parallel.
+const QR_BLOCK_ROWS: usize = 2048;
+
 /// What the trust-region step needs of the SVD `a = U S V^T` (m x n): `U^T b`, the singular
 /// values and `V^T`. A tall matrix (the refinements' thousands of rows for a few dozen
-/// parameters) is reduced by a Householder QR first, `a = Q R`: R's SVD (n x n) has the same
-/// singular values and V, and `U^T b = U_R^T (Q^T b)`, without forming the m x n factor U
-/// (the same steps to rounding; 5 % off a refinement-heavy analysis, drift with creep at 3x).
-/// A small problem (fewer than [`QR_FIRST_ROWS`] rows or four per column) gains nothing and
-/// keeps the direct SVD.
+/// parameters) is reduced to its triangle first ([`tall_qr`]), `a = Q R`: R's SVD (n x n) has
+/// the same singular values and V, and `U^T b = U_R^T (Q^T b)`, without forming the m x n
+/// factor U (the same steps to rounding; 5 % off a refinement-heavy analysis, drift with
+/// creep at 3x). A small problem (fewer than [`QR_FIRST_ROWS`] rows or four per column) gains
+/// nothing and keeps the direct SVD.
 fn svd_solve(a: DMatrix<f64>, b: DVector<f64>) -> Result<SvdParts, LsqError> {
     let (m, n) = a.shape();
     // The matrix whose SVD is taken and the right-hand side its left factor multiplies.
     let (a, b) = if m < QR_FIRST_ROWS || m < 4 * n {
         (a, b)
     } else {
-        let qr = a.qr();
-        let mut qtb = b;
-        qr.q_tr_mul(&mut qtb);
-        (qr.r(), qtb.rows(0, n).into_owned())
+        tall_qr(&a, &b)
     };
     let svd = a.svd(true, true);
     let (Some(u), Some(vt)) = (svd.u, svd.v_t) else {
         return Err(LsqError::NonFinite);
     };
     Ok((u.tr_mul(&b), svd.singular_values, vt))
+}
+
+/// The triangle R (n x n) of a Householder QR `a = Q R` of a tall `a` (m x n, m >= n) and
+/// the first n entries of `Q^T b`, reduced by blocks (Demmel et al., "Communication-optimal
+/// parallel and sequential QR", 2012: the tall-skinny QR): the row blocks of at most
+/// [`QR_BLOCK_ROWS`] are reduced to their triangles in parallel, and the triangles stacked are
+/// reduced once more. `Q` is orthogonal either way, so R is a QR's triangle of `a` (up to the
+/// signs of its rows, which the SVD absorbs) and the pair gives the same least-squares
+/// problem to rounding. The blocks do not depend on the thread count.
+fn tall_qr(a: &DMatrix<f64>, b: &DVector<f64>) -> (DMatrix<f64>, DVector<f64>) {
+    use rayon::prelude::*;
+    let (m, n) = a.shape();
+    let reduce = |a: DMatrix<f64>, mut b: DVector<f64>| {
+        let qr = a.qr();
+        qr.q_tr_mul(&mut b);
+        (qr.r(), b.rows(0, n).into_owned())
+    };
+    let blocks = m.div_ceil(QR_BLOCK_ROWS.max(4 * n));
+    if blocks <= 1 {
+        return reduce(a.clone(), b.clone());
+    }
+    // Balanced: every block has at least half the block rows, more than 2 n.
+    let parts: Vec<(DMatrix<f64>, DVector<f64>)> = (0..blocks)
+        .into_par_iter()
+        .map(|k| {
+            let (r0, r1) = (k * m / blocks, (k + 1) * m / blocks);
+            reduce(
+                a.rows(r0, r1 - r0).into_owned(),
+                b.rows(r0, r1 - r0).into_owned(),
+            )
+        })
+        .collect();
+    let mut stacked = DMatrix::zeros(blocks * n, n);
+    let mut rhs = DVector::zeros(blocks * n);
+    for (k, (r, c)) in parts.iter().enumerate() {
+        stacked.view_mut((k * n, 0), (n, n)).copy_from(r);
+        rhs.rows_mut(k * n, n).copy_from(c);
+    }
+    reduce(stacked, rhs)
 }
 
 /// `jac` with column k multiplied by `d[k]`.
@@ -443,7 +483,14 @@ mod tests {
 
     #[test]
     fn the_qr_reduced_svd_gives_the_steps_of_the_full_svd() {
-        let (a, b) = tall(1500, 12);
+        // One block, and three reduced in parallel.
+        for m in [1500, 5000] {
+            qr_reduced_against_full(m);
+        }
+    }
+
+    fn qr_reduced_against_full(m: usize) {
+        let (a, b) = tall(m, 12);
         let full = a.clone().svd(true, true);
         let u = full.u.unwrap();
         let (uf_full, s_full, vt_full) = (u.tr_mul(&b), full.singular_values, full.v_t.unwrap());
@@ -461,8 +508,8 @@ mod tests {
             );
         }
         for delta in [1e3, 1e-2] {
-            let (p, alpha) = trust_region_step(1512, &uf, &s, &vt, delta, 0.0);
-            let (q, beta) = trust_region_step(1512, &uf_full, &s_full, &vt_full, delta, 0.0);
+            let (p, alpha) = trust_region_step(m + 12, &uf, &s, &vt, delta, 0.0);
+            let (q, beta) = trust_region_step(m + 12, &uf_full, &s_full, &vt_full, delta, 0.0);
             assert!((&p - &q).norm() <= 1e-10 * q.norm().max(1e-300), "{p} {q}");
             assert!(
                 (alpha - beta).abs() <= 1e-8 * beta.abs().max(1e-12),
