@@ -16,7 +16,9 @@ pub(super) struct Subproblem {
     diag_h: DVector<f64>,
     /// Gradient in the scaled variables.
     g_h: DVector<f64>,
-    /// Jacobian in the scaled variables (m x n).
+    /// Jacobian in the scaled variables (m x n), or, for a tall one, its triangle R of a QR
+    /// (n x n): the quadratic model reads only |J_h s|^2 and (J_h s0) . (J_h s), which R gives
+    /// as well.
     j_h: DMatrix<f64>,
     /// Rows of the augmented Jacobian, m + n.
     rows: usize,
@@ -69,8 +71,13 @@ impl Subproblem {
         let d = DVector::from_fn(n, |k, _| v[k].sqrt() / scale_inv[k]);
         let diag_h = DVector::from_fn(n, |k, _| g[k] * dv[k] / scale_inv[k]);
         let g_h = d.component_mul(g);
-        let j_h = scaled_columns(jac, &d);
-        let (uf, s, vt) = svd_solve(augmented_jacobian(&j_h, &diag_h), augmented_residuals(f, n))?;
+        let (j_h, (uf, s, vt)) = if is_tall(m + n, n) {
+            reduced_svd(jac, &d, &diag_h, f)?
+        } else {
+            let j_h = scaled_columns(jac, &d);
+            let parts = svd_solve(augmented_jacobian(&j_h, &diag_h), augmented_residuals(f, n))?;
+            (j_h, parts)
+        };
         Ok(Subproblem {
             d,
             diag_h,
@@ -103,30 +110,24 @@ impl Subproblem {
 /// `U^T b`, the singular values and `V^T` of an SVD ([`svd_solve`]).
 type SvdParts = (DVector<f64>, DVector<f64>, DMatrix<f64>);
 
-/// Rows from which [`svd_solve`] reduces a matrix by QR first: the residual analysis's
-/// refinements (thousands); a calibration on static poses (a few hundred) keeps the direct SVD
-/// and its results to the last digit.
+/// Rows of the augmented Jacobian from which the subproblem reduces it by QR first
+/// ([`reduced_svd`]): the residual analysis's refinements (thousands); a calibration on static
+/// poses (a few hundred) keeps the direct SVD and its results to the last digit.
 const QR_FIRST_ROWS: usize = 1024;
 
 /// Rows of a block of [`tall_qr`]: a block's reflections stay in the cache (2048 rows of 30
 /// columns are half a megabyte), and the blocks are reduced in parallel.
 const QR_BLOCK_ROWS: usize = 2048;
 
-/// What the trust-region step needs of the SVD `a = U S V^T` (m x n): `U^T b`, the singular
-/// values and `V^T`. A tall matrix (the refinements' thousands of rows for a few dozen
-/// parameters) is reduced to its triangle first ([`tall_qr`]), `a = Q R`: R's SVD (n x n) has
-/// the same singular values and V, and `U^T b = U_R^T (Q^T b)`, without forming the m x n
-/// factor U (the same steps to rounding; 5 % off a refinement-heavy analysis, drift with
-/// creep at 3x). A small problem (fewer than [`QR_FIRST_ROWS`] rows or four per column) gains
-/// nothing and keeps the direct SVD.
+/// Whether an augmented Jacobian of `rows` x `n` is reduced by QR before its SVD
+/// ([`reduced_svd`]): from [`QR_FIRST_ROWS`] rows and four per column.
+fn is_tall(rows: usize, n: usize) -> bool {
+    rows >= QR_FIRST_ROWS && rows >= 4 * n
+}
+
+/// What the trust-region step needs of the SVD `a = U S V^T` (m x n) of a small matrix: `U^T
+/// b`, the singular values and `V^T` (a calibration on static poses: a few hundred rows).
 fn svd_solve(a: DMatrix<f64>, b: DVector<f64>) -> Result<SvdParts, LsqError> {
-    let (m, n) = a.shape();
-    // The matrix whose SVD is taken and the right-hand side its left factor multiplies.
-    let (a, b) = if m < QR_FIRST_ROWS || m < 4 * n {
-        (a, b)
-    } else {
-        tall_qr(&a, &b)
-    };
     let svd = a.svd(true, true);
     let (Some(u), Some(vt)) = (svd.u, svd.v_t) else {
         return Err(LsqError::NonFinite);
@@ -134,14 +135,45 @@ fn svd_solve(a: DMatrix<f64>, b: DVector<f64>) -> Result<SvdParts, LsqError> {
     Ok((u.tr_mul(&b), svd.singular_values, vt))
 }
 
-/// The triangle R (n x n) of a Householder QR `a = Q R` of a tall `a` (m x n, m >= n) and
-/// the first n entries of `Q^T b`, reduced by blocks (Demmel et al., "Communication-optimal
-/// parallel and sequential QR", 2012: the tall-skinny QR): the row blocks of at most
-/// [`QR_BLOCK_ROWS`] are reduced to their triangles in parallel, and the triangles stacked are
-/// reduced once more. `Q` is orthogonal either way, so R is a QR's triangle of `a` (up to the
-/// signs of its rows, which the SVD absorbs) and the pair gives the same least-squares
-/// problem to rounding. The blocks do not depend on the thread count.
-fn tall_qr(a: &DMatrix<f64>, b: &DVector<f64>) -> (DMatrix<f64>, DVector<f64>) {
+/// The subproblem's parts for a tall Jacobian (the refinements' thousands of rows for a few
+/// dozen parameters): the scaled Jacobian `J_h = jac diag(d)` is reduced to its triangle,
+/// `J_h = Q R` ([`tall_qr`]), without forming it or the augmented matrix (each was the size
+/// of the Jacobian: 16 MB a step on the final estimate's 66k residuals, allocated, zeroed and
+/// copied on one core); the augmented `[R; diag(sqrt(diag_h))]` (2n x n) is reduced again and
+/// its SVD taken. The augmented matrix `[Q 0; 0 I] [R; D]` has the same singular values and V,
+/// and `U^T (f, 0) = U_2^T (Q^T f, 0)`, the same steps to rounding (5 % off a
+/// refinement-heavy analysis, drift with creep at 3x, when it was first reduced by QR). Returns
+/// R (what the quadratic model reads of `J_h`) and the parts.
+fn reduced_svd(
+    jac: &DMatrix<f64>,
+    d: &DVector<f64>,
+    diag_h: &DVector<f64>,
+    f: &DVector<f64>,
+) -> Result<(DMatrix<f64>, SvdParts), LsqError> {
+    let n = jac.ncols();
+    let (r, qtf) = tall_qr(jac, d, f);
+    let mut aug = DMatrix::zeros(2 * n, n);
+    aug.view_mut((0, 0), (n, n)).copy_from(&r);
+    for k in 0..n {
+        aug[(n + k, k)] = diag_h[k].max(0.0).sqrt();
+    }
+    let mut rhs = DVector::zeros(2 * n);
+    rhs.rows_mut(0, n).copy_from(&qtf);
+    let qr = aug.qr();
+    qr.q_tr_mul(&mut rhs);
+    let parts = svd_solve(qr.r(), rhs.rows(0, n).into_owned())?;
+    Ok((r, parts))
+}
+
+/// The triangle R (n x n) of a Householder QR `a diag(d) = Q R` of a tall `a` (m x n, m >= 4 n)
+/// with its columns scaled by `d`, and the first n entries of `Q^T b`, reduced by blocks
+/// (Demmel et al., "Communication-optimal parallel and sequential QR", 2012: the tall-skinny
+/// QR): the row blocks of about [`QR_BLOCK_ROWS`], scaled as they are copied, are reduced to
+/// their triangles in parallel, and the triangles stacked are reduced once more. `Q` is
+/// orthogonal either way, so R is a QR's triangle (up to the signs of its rows, which the SVD
+/// absorbs) and the pair gives the same least-squares problem to rounding. The blocks do not
+/// depend on the thread count.
+fn tall_qr(a: &DMatrix<f64>, d: &DVector<f64>, b: &DVector<f64>) -> (DMatrix<f64>, DVector<f64>) {
     use rayon::prelude::*;
     let (m, n) = a.shape();
     let reduce = |a: DMatrix<f64>, mut b: DVector<f64>| {
@@ -149,20 +181,21 @@ fn tall_qr(a: &DMatrix<f64>, b: &DVector<f64>) -> (DMatrix<f64>, DVector<f64>) {
         qr.q_tr_mul(&mut b);
         (qr.r(), b.rows(0, n).into_owned())
     };
+    let block = |r0: usize, r1: usize| {
+        let mut x = a.rows(r0, r1 - r0).into_owned();
+        for k in 0..n {
+            x.column_mut(k).scale_mut(d[k]);
+        }
+        reduce(x, b.rows(r0, r1 - r0).into_owned())
+    };
     let blocks = m.div_ceil(QR_BLOCK_ROWS.max(4 * n));
     if blocks <= 1 {
-        return reduce(a.clone(), b.clone());
+        return block(0, m);
     }
     // Balanced: every block has at least half the block rows, more than 2 n.
     let parts: Vec<(DMatrix<f64>, DVector<f64>)> = (0..blocks)
         .into_par_iter()
-        .map(|k| {
-            let (r0, r1) = (k * m / blocks, (k + 1) * m / blocks);
-            reduce(
-                a.rows(r0, r1 - r0).into_owned(),
-                b.rows(r0, r1 - r0).into_owned(),
-            )
-        })
+        .map(|k| block(k * m / blocks, (k + 1) * m / blocks))
         .collect();
     let mut stacked = DMatrix::zeros(blocks * n, n);
     let mut rhs = DVector::zeros(blocks * n);
@@ -489,12 +522,25 @@ mod tests {
         }
     }
 
+    /// The tall subproblem's parts ([`reduced_svd`]: the scaled Jacobian reduced by blocks,
+    /// then the augmented triangle) against the SVD of the augmented matrix formed in full, and
+    /// its triangle against the scaled Jacobian in the quadratic model.
     fn qr_reduced_against_full(m: usize) {
-        let (a, b) = tall(m, 12);
-        let full = a.clone().svd(true, true);
+        let n = 12;
+        let (a, f) = tall(m, n);
+        let d = DVector::from_fn(n, |k, _| 0.5 + 0.25 * k as f64);
+        // One negative term: the augmented matrix takes it as 0, the quadratic model as it is.
+        let diag = DVector::from_fn(n, |k, _| if k == 3 { -0.2 } else { 0.1 * k as f64 });
+        let j_h = scaled_columns(&a, &d);
+        let full = augmented_jacobian(&j_h, &diag).svd(true, true);
         let u = full.u.unwrap();
-        let (uf_full, s_full, vt_full) = (u.tr_mul(&b), full.singular_values, full.v_t.unwrap());
-        let (uf, s, vt) = svd_solve(a, b).unwrap();
+        let (uf_full, s_full, vt_full) = (
+            u.tr_mul(&augmented_residuals(&f, n)),
+            full.singular_values,
+            full.v_t.unwrap(),
+        );
+        let (r, (uf, s, vt)) = reduced_svd(&a, &d, &diag, &f).unwrap();
+        assert_eq!(r.shape(), (n, n));
         // The same singular values; the singular vectors up to sign, so compare what the
         // trust-region step is made of: the Gauss-Newton step and a Levenberg-Marquardt one.
         let mut order_a: Vec<f64> = s.iter().copied().collect();
@@ -508,13 +554,32 @@ mod tests {
             );
         }
         for delta in [1e3, 1e-2] {
-            let (p, alpha) = trust_region_step(m + 12, &uf, &s, &vt, delta, 0.0);
-            let (q, beta) = trust_region_step(m + 12, &uf_full, &s_full, &vt_full, delta, 0.0);
+            let (p, alpha) = trust_region_step(m + n, &uf, &s, &vt, delta, 0.0);
+            let (q, beta) = trust_region_step(m + n, &uf_full, &s_full, &vt_full, delta, 0.0);
             assert!((&p - &q).norm() <= 1e-10 * q.norm().max(1e-300), "{p} {q}");
             assert!(
                 (alpha - beta).abs() <= 1e-8 * beta.abs().max(1e-12),
                 "{alpha} {beta}"
             );
         }
+        let g = j_h.tr_mul(&f);
+        let (s0, s1) = (
+            DVector::from_fn(n, |k, _| (k as f64 - 5.0) * 0.1),
+            DVector::from_fn(n, |k, _| 1.0 / (1.0 + k as f64)),
+        );
+        let close = |x: f64, y: f64| (x - y).abs() <= 1e-11 * y.abs().max(1.0);
+        let (v, w) = (
+            quadratic(&r, &g, &s1, &diag),
+            quadratic(&j_h, &g, &s1, &diag),
+        );
+        assert!(close(v, w), "{v} {w}");
+        let (x, y) = (
+            quadratic_1d(&r, &g, &s1, &diag, Some(&s0)),
+            quadratic_1d(&j_h, &g, &s1, &diag, Some(&s0)),
+        );
+        assert!(
+            close(x.0, y.0) && close(x.1, y.1) && close(x.2, y.2),
+            "{x:?} {y:?}"
+        );
     }
 }
