@@ -712,21 +712,28 @@ impl Problem for Refit<'_> {
         j: &mut nalgebra::DMatrix<f64>,
     ) -> Result<(), String> {
         let ne = self.n_effects();
-        j.fill(0.0);
-        self.effect_columns(&x[..ne], &upper[..ne], j)?;
-        let Some(l) = &self.nuisance else {
-            return Ok(());
-        };
-        for gj in 0..l.n() {
-            for (k, cols) in l.cols.iter().enumerate() {
-                let Some(cols) = cols else { continue };
-                for c in 0..3 {
-                    j[(3 * k + c, ne + gj)] = -cols[gj][c];
+        // The calibration parameters' columns, one per thread (column-major storage: each
+        // column a slice), the effects' ones zeroed for [`Refit::effect_columns`].
+        let rows = j.nrows();
+        j.as_mut_slice()
+            .par_chunks_mut(rows)
+            .enumerate()
+            .for_each(|(p, col)| {
+                col.fill(0.0);
+                let Some(l) = self.nuisance.as_ref().filter(|_| p >= ne) else {
+                    return;
+                };
+                let gj = p - ne;
+                for (k, cols) in l.cols.iter().enumerate() {
+                    if let Some(cols) = cols {
+                        for c in 0..3 {
+                            col[3 * k + c] = -cols[gj][c];
+                        }
+                    }
                 }
-            }
-            j[(3 * self.n + gj, ne + gj)] = l.prior_sqrt[gj];
-        }
-        Ok(())
+                col[3 * self.n + gj] = l.prior_sqrt[gj];
+            });
+        self.effect_columns(&x[..ne], &upper[..ne], j)
     }
 }
 
@@ -1003,40 +1010,40 @@ impl Refit<'_> {
         if j.nrows() < 3 * self.n || j.ncols() != nt || fit.residuals.len() < 3 * self.n {
             return None;
         }
-        // Per time block: J_b^T J_b and J_b^T r_b over its rows (r the optimum's residual).
-        let mut index = std::collections::HashMap::new();
-        let mut per: Vec<(nalgebra::DMatrix<f64>, nalgebra::DVector<f64>)> = Vec::new();
-        let mut rr = 0.0;
+        // Per time block: J_b^T J_b and J_b^T r_b over its rows (r the optimum's residual),
+        // the blocks in the order they first appear, each from its rows gathered (a product of
+        // matrices, in parallel: on the final estimate's 66k residuals the rank-one updates row
+        // by row took 0.1 s on one core).
+        let mut order: Vec<usize> = Vec::new();
+        let mut members: std::collections::HashMap<usize, Vec<usize>> =
+            std::collections::HashMap::new();
         let mut k = 0;
         for (si, rows) in self.rows.iter().enumerate() {
             for &i in rows {
                 let b = blocks.block[si][i];
-                let slot = *index.entry(b).or_insert_with(|| {
-                    per.push((
-                        nalgebra::DMatrix::zeros(nt, nt),
-                        nalgebra::DVector::zeros(nt),
-                    ));
-                    per.len() - 1
-                });
-                let (m, v) = &mut per[slot];
-                for c in 0..3 {
-                    let row = j.row(3 * k + c);
-                    let r = fit.residuals[3 * k + c];
-                    rr += r * r;
-                    for a in 0..nt {
-                        let ja = row[a];
-                        if ja == 0.0 {
-                            continue;
-                        }
-                        v[a] += ja * r;
-                        for bb in 0..nt {
-                            m[(a, bb)] += ja * row[bb];
-                        }
-                    }
-                }
+                members
+                    .entry(b)
+                    .or_insert_with(|| {
+                        order.push(b);
+                        Vec::new()
+                    })
+                    .push(k);
                 k += 1;
             }
         }
+        let r = &fit.residuals;
+        let rr: f64 = r[..3 * self.n].iter().map(|v| v * v).sum();
+        let per: Vec<(nalgebra::DMatrix<f64>, nalgebra::DVector<f64>)> = order
+            .par_iter()
+            .map(|b| {
+                let ks = &members[b];
+                let jb = nalgebra::DMatrix::from_fn(3 * ks.len(), nt, |q, a| {
+                    j[(3 * ks[q / 3] + q % 3, a)]
+                });
+                let rb = nalgebra::DVector::from_fn(3 * ks.len(), |q, _| r[3 * ks[q / 3] + q % 3]);
+                (jb.tr_mul(&jb), jb.tr_mul(&rb))
+            })
+            .collect();
         let mut ata = nalgebra::DMatrix::<f64>::zeros(nt, nt);
         for (m, _) in &per {
             ata += m;
