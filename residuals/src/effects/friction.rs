@@ -162,12 +162,23 @@ enum Scope<'p> {
     Complete(&'p [Tangents]),
 }
 
+/// Per series and row, the derivatives of the deflection by the joints' and the supports'
+/// limits at zero ([`crate::model::ExtendedModel::friction_onset_path`]).
+type OnsetPath = Vec<Vec<Option<[[f64; 3]; 2]>>>;
+
+/// The onset derivatives of a fit's last step from no friction, and the values they were
+/// taken at ([`step_at`]).
+type Onset = std::cell::RefCell<Option<(Theta, std::sync::Arc<OnsetPath>)>>;
+
 /// One linearised fit of the friction with the calibration parameters about `theta` (the
 /// context's model holds `at`: its residuals already take that friction's deflection). From no
 /// friction the columns of the limits are their derivatives at zero (the pre-sliding travel
 /// has none there, and keeps its value); elsewhere the derivatives of the whole path at
 /// `theta` (the tangent pass), the joints' pre-sliding travel among them while the joints rub.
-/// `scope` says which series its tangent pass runs on.
+/// `scope` says which series its tangent pass runs on. The derivatives at zero are kept in
+/// `onset` for the next step at the same `theta` (a limit that came out below zero is held and
+/// the step made again: the same passes).
+#[allow(clippy::too_many_arguments)]
 fn step_at(
     ctx: &Context,
     train: &[usize],
@@ -176,6 +187,7 @@ fn step_at(
     theta: Theta,
     held: [bool; 3],
     scope: Scope,
+    onset: &Onset,
 ) -> Option<Step> {
     let n = ctx.rows.len();
     let rubs = theta[0] != 0.0 || theta[1] != 0.0;
@@ -202,19 +214,34 @@ fn step_at(
     // Per row: the change from the model's friction to `theta` (the offset), and the columns.
     let mut pass = None;
     let (offset, cols): (Vec<[f64; 3]>, Vec<Vec<[f64; 3]>>) = if !rubs {
-        let f = Rubbing::from_effect(&with_values(entry, theta));
-        let paths = ctx.paths();
-        let per: Vec<Vec<Option<[[f64; 3]; 2]>>> = paths
-            .par_iter()
-            .map(|(rigid, kappa)| ctx.model.friction_onset_path(rigid, kappa, &f))
-            .collect();
+        let kept = onset
+            .borrow()
+            .as_ref()
+            .filter(|(t, _)| *t == theta)
+            .map(|(_, p)| p.clone());
+        let per = kept.unwrap_or_else(|| {
+            let f = Rubbing::from_effect(&with_values(entry, theta));
+            let per: std::sync::Arc<OnsetPath> = std::sync::Arc::new(
+                ctx.paths()
+                    .par_iter()
+                    .map(|(rigid, kappa)| ctx.model.friction_onset_path(rigid, kappa, &f))
+                    .collect(),
+            );
+            *onset.borrow_mut() = Some((theta, per.clone()));
+            per
+        });
+        // The columns of the limits fitted, in `free`'s order.
         let cols = ctx
             .rows
             .iter()
             .map(|r| {
-                per[r.s][r.k].map_or(vec![[0.0; 3]; 2], |c| {
-                    c.iter().map(|d| [d[0], d[1], ctx.w_phi * d[2]]).collect()
-                })
+                let c = per[r.s][r.k].unwrap_or([[0.0; 3]; 2]);
+                free.iter()
+                    .map(|&j| {
+                        let d = c[j];
+                        [d[0], d[1], ctx.w_phi * d[2]]
+                    })
+                    .collect()
             })
             .collect();
         let offset = (0..n).map(|i| diff(Some([0.0; 3]), at[i])).collect();
@@ -324,7 +351,8 @@ fn fit_from(
     } else {
         Scope::All
     };
-    let mut step = step_at(ctx, train, &entry, &at, theta, bound, scope)?;
+    let onset = Onset::default();
+    let mut step = step_at(ctx, train, &entry, &at, theta, bound, scope, &onset)?;
     // The training error the calibration parameters alone leave (what a friction's step must
     // improve on).
     let sse0 = || {
@@ -340,7 +368,7 @@ fn fit_from(
             if bound[0] && bound[1] {
                 return None;
             }
-            step = step_at(ctx, train, &entry, &at, theta, bound, scope)?;
+            step = step_at(ctx, train, &entry, &at, theta, bound, scope, &onset)?;
             continue;
         }
         let sse = step.fit.0.sse;
@@ -363,7 +391,7 @@ fn fit_from(
             break;
         }
         theta = next;
-        step = step_at(ctx, train, &entry, &at, theta, bound, scope)?;
+        step = step_at(ctx, train, &entry, &at, theta, bound, scope, &onset)?;
     }
     if let Some(done) = step.partial.take() {
         step = step_at(
@@ -374,6 +402,7 @@ fn fit_from(
             theta,
             bound,
             Scope::Complete(&done),
+            &onset,
         )?;
     }
     let Step { fit, x, sd, .. } = step;
