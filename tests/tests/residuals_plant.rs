@@ -201,6 +201,26 @@ fn finds_backlash_and_its_play() {
     );
 }
 
+/// Friction in the supports alone (the joints turn freely), at three times the prototype's: the
+/// fit from no friction holds the joints' limit at zero when its step takes it below, and the
+/// supports' limit is fitted on its own column (it was fitted on the joints' until 50d4ac4).
+#[test]
+fn finds_friction_in_the_supports_alone() {
+    let mut plant = quiet_plant();
+    plant.friction = PlantConfig::prototype().friction;
+    plant.friction.joint_torque_n_mm = 0.0;
+    plant.friction.support_force_n *= 3.0;
+    let a = analyse(&RobotConfig::nominal(), &plant);
+    assert_eq!(names(&a), ["friction"], "{}", report(&a));
+    let f = a.robot.effects.friction.as_ref().unwrap();
+    assert!(
+        f.joint_torque_n_mm < 0.5 && (f.support_force_n - 0.12).abs() < 0.012,
+        "{f:?}: {}",
+        report(&a)
+    );
+    assert_eq!(a.verdict, Verdict::Explained, "{}", report(&a));
+}
+
 /// The prototype's friction at three times its value beside its gear play: the two
 /// hysteresis sources are told apart (a play acts on the motors, before the structure; the
 /// friction on the pose through the structure's compliance, stuck elements holding), each with
