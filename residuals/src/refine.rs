@@ -109,12 +109,8 @@ const FIRST_RADIUS: f64 = 100.0;
 /// ([`FrozenFriction`]; a search's refinement makes one).
 const FRICTION_RELINEARISATIONS: usize = 2;
 
-/// Most evaluations of the model in a refinement of the search (7-13 reach the tolerance). Was
-/// 200: on backlash at 10x in the reached convention, a friction of the supports alone taken in
-/// first (it imitates the plays, and the backward pass takes it out again) crawled towards its
-/// bound beside the plays through 200 evaluations (12.7 s); at 40 the alternations that follow
-/// take the plays to the same values (30.0 / 40.0 / 30.0 steps).
-const MAX_EVALUATIONS: usize = 40;
+/// Most evaluations of the model in a refinement of the search (7-13 reach the tolerance).
+const MAX_EVALUATIONS: usize = 200;
 
 /// A search's refinement ends when its last [`STALL_STEPS`] steps together took less than
 /// [`STALL_FTOL`] of the cost off: a loaded model's residuals are solved from the last
