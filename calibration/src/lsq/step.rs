@@ -159,9 +159,8 @@ fn reduced_svd(
     }
     let mut rhs = DVector::zeros(2 * n);
     rhs.rows_mut(0, n).copy_from(&qtf);
-    let qr = aug.qr();
-    qr.q_tr_mul(&mut rhs);
-    let parts = svd_solve(qr.r(), rhs.rows(0, n).into_owned())?;
+    let (r2, qtb) = qr_reduce(aug, rhs);
+    let parts = svd_solve(r2, qtb)?;
     Ok((r, parts))
 }
 
@@ -176,17 +175,12 @@ fn reduced_svd(
 fn tall_qr(a: &DMatrix<f64>, d: &DVector<f64>, b: &DVector<f64>) -> (DMatrix<f64>, DVector<f64>) {
     use rayon::prelude::*;
     let (m, n) = a.shape();
-    let reduce = |a: DMatrix<f64>, mut b: DVector<f64>| {
-        let qr = a.qr();
-        qr.q_tr_mul(&mut b);
-        (qr.r(), b.rows(0, n).into_owned())
-    };
     let block = |r0: usize, r1: usize| {
         let mut x = a.rows(r0, r1 - r0).into_owned();
         for k in 0..n {
             x.column_mut(k).scale_mut(d[k]);
         }
-        reduce(x, b.rows(r0, r1 - r0).into_owned())
+        qr_reduce(x, b.rows(r0, r1 - r0).into_owned())
     };
     let blocks = m.div_ceil(QR_BLOCK_ROWS.max(4 * n));
     if blocks <= 1 {
@@ -203,7 +197,16 @@ fn tall_qr(a: &DMatrix<f64>, d: &DVector<f64>, b: &DVector<f64>) -> (DMatrix<f64
         stacked.view_mut((k * n, 0), (n, n)).copy_from(r);
         rhs.rows_mut(k * n, n).copy_from(c);
     }
-    reduce(stacked, rhs)
+    qr_reduce(stacked, rhs)
+}
+
+/// The triangle R (n x n) of a Householder QR `a = Q R` (m x n, m >= n) and the first n
+/// entries of `Q^T b`.
+fn qr_reduce(a: DMatrix<f64>, mut b: DVector<f64>) -> (DMatrix<f64>, DVector<f64>) {
+    let n = a.ncols();
+    let qr = a.qr();
+    qr.q_tr_mul(&mut b);
+    (qr.r(), b.rows(0, n).into_owned())
 }
 
 /// `jac` with column k multiplied by `d[k]`.
