@@ -1136,11 +1136,16 @@ impl ExtendedModel {
             .map(|(c, kc)| {
                 let mut warm = pcr_kinematics::statics::LoadedWarm::default();
                 let mut guess = start_guess(s, c[0]);
+                // The last row solved: a row at rest (the same curvatures) takes its result.
+                let mut last: Option<Sensitivity> = None;
                 c.iter()
                     .zip(kc)
                     .map(|(&k, &kp)| {
                         if let Some(p) = s.samples[k].pose {
                             guess = Pose::new(p[0], p[1], p[2]);
+                        }
+                        if let Some(x) = last.filter(|x| x.kappa == kp) {
+                            return Some(x);
                         }
                         let out = match &self.loads {
                             Some(l) => {
@@ -1170,6 +1175,7 @@ impl ExtendedModel {
                         if let Some(x) = &out {
                             guess = Pose::new(x.pose[0], x.pose[1], x.pose[2]);
                         }
+                        last = out;
                         out
                     })
                     .collect()

@@ -11,7 +11,7 @@
 //! that.
 
 use crate::effects::{self, Parameter};
-use crate::model::{ExtendedModel, Sensitivity};
+use crate::model::{ExtendedModel, Prediction, Sensitivity};
 use crate::nuisance::Nuisance;
 use crate::series::{Blocks, Series};
 use pcr_calibration::lsq::{self, Options, Problem};
@@ -373,7 +373,7 @@ impl Linearised {
             loads: None,
             ..model.clone()
         });
-        let preds: Vec<Vec<crate::model::Prediction>> = series
+        let preds: Vec<Vec<Prediction>> = series
             .iter()
             .zip(rows)
             .map(|(s, ks)| {
@@ -411,14 +411,23 @@ impl Linearised {
                 per.par_iter()
                     .flat_map_iter(|chunk| {
                         let mut warm = pcr_kinematics::statics::LoadedWarm::default();
+                        // The last row solved: a row at rest (the same curvatures and tendon
+                        // displacements) takes its columns.
+                        let mut last: Option<(&Prediction, Vec<[f64; 3]>)> = None;
                         chunk
                             .iter()
                             .map(|&(s, k)| {
                                 let p = &preds[s][k];
                                 p.pose?;
+                                if let Some((q, c)) = &last {
+                                    if q.kappa == p.kappa && q.dl_eff == p.dl_eff {
+                                        return Some(c.clone());
+                                    }
+                                }
                                 let mut c = vec![[0.0; 3]; nui.n];
-                                nui.loaded_columns(changes, p, w_phi, &mut warm, &mut c)
-                                    .then_some(c)
+                                let ok = nui.loaded_columns(changes, p, w_phi, &mut warm, &mut c);
+                                last = ok.then(|| (p, c.clone()));
+                                ok.then_some(c)
                             })
                             .collect::<Vec<_>>()
                     })
