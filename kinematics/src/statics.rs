@@ -824,8 +824,8 @@ impl Robot {
     /// and the deflection of its pose from the rigid one; or, where a linearisation gave the
     /// solution's derivatives in the curvatures, that solution moved along them, off by the
     /// second order of the change: on springs + frame + backlash at 3x, 45,000 of the
-    /// analysis's 213,000 linearised solves took a first step above 1 mm from the offsets,
-    /// 700 from the derivatives) and iterated with the Jacobian `warm` carries, refreshed only
+    /// analysis's 155,000 solves of a sensitivity took a first step above 1 mm from the
+    /// offsets, 700 from the derivatives) and iterated with the Jacobian `warm` carries, refreshed only
     /// when the iteration stops contracting (chord Newton). Converges to
     /// the same equilibrium as [`Robot::fk_loaded`] (to an estimated 1e-9), at a fraction of the
     /// cost where the configuration changes little from one call to the next.
