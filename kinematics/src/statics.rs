@@ -553,7 +553,8 @@ struct Linearised {
     z: VN,
     segs: Segments,
     f0: VN,
-    /// The pose's rows of the inverse Jacobian there.
+    /// The inverse Jacobian there (the state keeps it too), and the pose's rows of it.
+    inv: MN,
     rows: PoseRows,
     /// The residual at `z` with the segments integrated, and the legs' shares it was assembled
     /// from: the integration that linearised the segments gives them (its outputs are
@@ -825,9 +826,9 @@ impl Robot {
     /// solution's derivatives in the curvatures, that solution moved along them, off by the
     /// second order of the change: on springs + frame + backlash at 3x, 45,000 of the
     /// analysis's 155,000 solves of a sensitivity took a first step above 1 mm from the
-    /// offsets, 700 from the derivatives) and iterated with the Jacobian `warm` carries, refreshed only
-    /// when the iteration stops contracting (chord Newton). Converges to
-    /// the same equilibrium as [`Robot::fk_loaded`] (to an estimated 1e-9), at a fraction of the
+    /// offsets, 700 from the derivatives) and iterated with the Jacobian `warm` carries,
+    /// refreshed only when the iteration stops contracting (chord Newton). Converges to the
+    /// same equilibrium as [`Robot::fk_loaded`] (to an estimated 1e-9), at a fraction of the
     /// cost where the configuration changes little from one call to the next.
     pub fn fk_loaded_warm(
         &self,
@@ -868,27 +869,22 @@ impl Robot {
             }
             o
         });
-        match (warm.z, warm.tangent.take()) {
-            (Some(prev), Some((t, at))) => {
-                // Along the solution's derivatives from where it was solved.
-                z = prev;
-                for (c, (k, k0)) in t.iter().zip(kappa.iter().zip(at)) {
-                    z += c * (k - k0);
-                }
+        if let (Some(prev), Some((t, at))) = (warm.z, warm.tangent.take()) {
+            // Along the solution's derivatives from where it was solved.
+            z = prev;
+            for (c, (k, k0)) in t.iter().zip(kappa.iter().zip(at)) {
+                z += c * (k - k0);
             }
-            _ => {
-                if let Some(o) = offsets {
-                    let mut start = o;
-                    if let Some(b) = warm.before {
-                        start += o - b;
-                    }
-                    for k in 0..3 {
-                        z[k] += start[k];
-                    }
-                    for k in 3..N {
-                        z[k] = start[k];
-                    }
-                }
+        } else if let Some(o) = offsets {
+            let mut start = o;
+            if let Some(b) = warm.before {
+                start += o - b;
+            }
+            for k in 0..3 {
+                z[k] += start[k];
+            }
+            for k in 3..N {
+                z[k] = start[k];
             }
         }
         let z = match self.quasi_newton(setup, loads, z, &mut warm.inv, f64::INFINITY, 60) {
@@ -1181,6 +1177,7 @@ impl Robot {
             z,
             segs,
             f0,
+            inv,
             rows,
             exact,
             terms,
@@ -1205,11 +1202,11 @@ impl Robot {
             z,
             segs,
             f0,
+            inv,
             rows,
             exact,
             terms,
         } = self.linearised_warm(kappa, loads, guess, warm)?;
-        let inv = warm.inv.ok_or(FkError::NoSolution { reached: 0.0 })?;
         let d_loads = self.load_columns(&st, loads, &z, &segs, &f0, &rows);
         // The curvatures change the segments themselves: their residual is integrated again
         // (the same fixed-step integration, smooth in the curvature). Leg i's curvature
@@ -1775,6 +1772,78 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn a_sensitivity_keeps_the_solutions_derivatives_and_the_next_solve_starts_along_them() {
+        let (_, r, target, kappa) = nominal_at_target();
+        let loads = Loads {
+            force: [0.3, -0.2],
+            k_m: 900.0,
+            k_p: 600.0,
+            ..unloaded()
+        };
+        let rest = r.home_joint_angles();
+        let cold = |k: &[f64; 3]| {
+            let st = r.loaded_setup_at_rest(k, rest);
+            r.fk_loaded_in(&st, k, &loads, &target).unwrap()
+        };
+        let mut warm = LoadedWarm::default();
+        r.loaded_sensitivity_warm(&kappa, &loads, &target, &mut warm)
+            .unwrap();
+        let (t, at) = warm.tangent.expect("a sensitivity keeps the derivatives");
+        assert_eq!(at, kappa);
+        // Every unknown's derivative (pose, link forces, joint displacements, base curvatures)
+        // against central differences of the cold solve.
+        for i in 0..3 {
+            let h = 1e-6;
+            let (mut kp, mut km) = (kappa, kappa);
+            kp[i] += h;
+            km[i] -= h;
+            let fd = (cold(&kp) - cold(&km)) / (2.0 * h);
+            let tol = 1e-4 * fd.amax() + 1e-6;
+            assert!((fd - t[i]).amax() < tol, "leg {i}: {:?} vs {:?}", t[i], fd);
+        }
+        // A change of `b` rad of bending on each leg: how far the start along the derivatives
+        // and the start from the old deflection (the new rigid pose plus the old offsets from
+        // it, the rest unchanged) are from the new equilibrium, and how far that moved.
+        let z0 = cold(&kappa);
+        let starts = |b: f64| {
+            let next: [f64; 3] = std::array::from_fn(|i| kappa[i] + b / r.legs[i].l_c);
+            let z1 = cold(&next);
+            let mut along = z0;
+            for (c, (k, k0)) in t.iter().zip(next.iter().zip(kappa)) {
+                along += c * (k - k0);
+            }
+            let (r0, r1) = (
+                r.fk_warm(&kappa, &target).unwrap(),
+                r.fk_warm(&next, &target).unwrap(),
+            );
+            let mut offsets = z0;
+            offsets[0] += r1.x - r0.x;
+            offsets[1] += r1.y - r0.y;
+            offsets[2] += r1.phi - r0.phi;
+            (
+                next,
+                z1,
+                (z1 - along).amax(),
+                (z1 - offsets).amax(),
+                (z1 - z0).amax(),
+            )
+        };
+        // A stretch between two anchors (0.1 rad): the joints move 4 mm under these springs,
+        // the start along the derivatives is off by a tenth of that, the offsets' by all of
+        // it; at a fifth of the change the error falls as its square.
+        let (next, z1, off, off_offsets, moved) = starts(0.1);
+        assert!(
+            off < 0.15 * moved && off < 0.15 * off_offsets,
+            "{off} {off_offsets} {moved}"
+        );
+        let (_, _, off_small, _, _) = starts(0.02);
+        assert!(off_small < off / 15.0, "{off_small} against {off}");
+        let e = r.fk_loaded_warm(&next, &loads, &target, &mut warm).unwrap();
+        assert!((e.pose.x - z1[0]).abs() < 1e-7 && (e.pose.y - z1[1]).abs() < 1e-7);
+        assert!((e.pose.phi - z1[2]).abs() < 1e-9);
     }
 
     /// The nominal robot at a pose off home, with its curvatures there: where the tests of the
