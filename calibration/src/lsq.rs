@@ -108,6 +108,13 @@ pub struct Options {
     /// solved iteratively), SciPy's test refuses step after step, each a quarter of the last,
     /// until one gains by chance.
     pub ftol_refused: bool,
+    /// Steps taken in a row after an evaluated Jacobian whose Jacobian is Broyden's rank-one
+    /// update of the last one instead ([`Problem::secant_columns`]: the columns it may
+    /// change; the others are the problem's own, constant); 0 (the default): every step
+    /// taken evaluates the Jacobian. Where a Jacobian costs more than an evaluation of the
+    /// residuals (a model solved iteratively, with its responses at every row), the steps
+    /// after the first few move along directions the last Jacobian nearly has.
+    pub secant_steps: usize,
 }
 
 impl Default for Options {
@@ -122,6 +129,7 @@ impl Default for Options {
             stall_window: 0,
             stall_ftol: 0.0,
             ftol_refused: false,
+            secant_steps: 0,
         }
     }
 }
@@ -145,6 +153,14 @@ pub trait Problem {
         j: &mut DMatrix<f64>,
     ) -> Result<(), String> {
         forward_difference(self, x, r, upper, j)
+    }
+
+    /// The columns of the Jacobian a secant step may change ([`Options::secant_steps`]):
+    /// the first so many (the default: all of them). Where the residuals are linear in the
+    /// others (their columns constant), Broyden's update of the first ones alone keeps the
+    /// others exact and still meets the secant condition.
+    fn secant_columns(&self, n: usize) -> usize {
+        n
     }
 }
 
@@ -503,6 +519,78 @@ mod tests {
         assert_eq!(with.evaluations, without.evaluations);
         assert_eq!(n_without + 1, n_with);
         assert_eq!(without.jacobians, n_without);
+    }
+
+    /// [`Exp`] with a third parameter the residuals are linear in (an offset along a fixed
+    /// column, as the joint refinement's calibration parameters), its analytic Jacobian
+    /// counted; the secant steps may change the first two columns.
+    struct ExpOffset(usize);
+    impl ExpOffset {
+        fn column(k: usize) -> f64 {
+            (k as f64 * 0.7).cos()
+        }
+    }
+    impl Problem for ExpOffset {
+        fn residual_count(&self) -> usize {
+            20
+        }
+        fn residuals(&mut self, x: &[f64], r: &mut [f64]) -> Result<(), String> {
+            Exp.residuals(x, r)?;
+            for (k, r) in r.iter_mut().enumerate() {
+                *r += x[2] * Self::column(k) - 0.5 * (k as f64 * 0.7).cos().powi(2);
+            }
+            Ok(())
+        }
+        fn jacobian(
+            &mut self,
+            x: &[f64],
+            _r: &[f64],
+            _upper: &[f64],
+            j: &mut DMatrix<f64>,
+        ) -> Result<(), String> {
+            self.0 += 1;
+            for k in 0..20 {
+                let t = k as f64 / 10.0;
+                j[(k, 0)] = (x[1] * t).exp();
+                j[(k, 1)] = x[0] * t * (x[1] * t).exp();
+                j[(k, 2)] = Self::column(k);
+            }
+            Ok(())
+        }
+        fn secant_columns(&self, _n: usize) -> usize {
+            2
+        }
+    }
+
+    #[test]
+    fn secant_steps_reach_the_optimum_with_fewer_jacobians_and_leave_the_linear_columns_exact() {
+        let run = |secant_steps| {
+            let mut p = ExpOffset(0);
+            let opt = Options {
+                secant_steps,
+                ..Options::default()
+            };
+            let fit = solve(&mut p, &[1.0, 0.1, 0.0], &[-INF; 3], &[INF; 3], &opt).unwrap();
+            (fit, p.0)
+        };
+        let (exact, n_exact) = run(0);
+        let (secant, n_secant) = run(1);
+        assert!(exact.status.converged() && secant.status.converged());
+        for k in 0..3 {
+            assert!(
+                (exact.x[k] - secant.x[k]).abs() < 1e-5 * exact.x[k].abs().max(1.0),
+                "{k}: {} against {}",
+                secant.x[k],
+                exact.x[k]
+            );
+        }
+        assert!((secant.cost - exact.cost).abs() <= 1e-8 * exact.cost);
+        assert!(n_secant < n_exact, "{n_secant} Jacobians against {n_exact}");
+        assert_eq!(secant.jacobians, n_secant);
+        // The offset's column is the problem's own after every update.
+        for k in 0..20 {
+            assert_eq!(secant.jacobian[(k, 2)], ExpOffset::column(k));
+        }
     }
 
     /// [`Exp`] whose residuals carry a jitter (`amplitude` each, turning over as fast as

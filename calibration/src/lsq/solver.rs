@@ -38,6 +38,8 @@ pub(super) struct Solver<'a, P: Problem + ?Sized> {
     evaluations: usize,
     /// Jacobian evaluations.
     jacobians: usize,
+    /// Secant steps left before the next Jacobian is evaluated ([`Options::secant_steps`]).
+    secants_left: usize,
 }
 
 /// How a search for a step ended.
@@ -94,6 +96,7 @@ impl<'a, P: Problem + ?Sized> Solver<'a, P> {
             alpha: 0.0,
             evaluations: 1,
             jacobians: 1,
+            secants_left: opt.secant_steps,
         })
     }
 
@@ -167,16 +170,22 @@ impl<'a, P: Problem + ?Sized> Solver<'a, P> {
     /// Takes the trial point: its residuals, cost, Jacobian, gradient and the grown variable
     /// scale. `Err` when the Jacobian cannot be evaluated there or is not finite.
     pub(super) fn accept_trial(&mut self) -> Result<(), LsqError> {
-        self.take_trial();
-        self.problem
-            .jacobian(
-                self.x.as_slice(),
-                self.f.as_slice(),
-                self.upper,
-                &mut self.jac,
-            )
-            .map_err(|_| LsqError::NonFinite)?;
-        self.jacobians += 1;
+        if self.secants_left > 0 {
+            self.secants_left -= 1;
+            self.secant_update();
+        } else {
+            self.take_trial();
+            self.problem
+                .jacobian(
+                    self.x.as_slice(),
+                    self.f.as_slice(),
+                    self.upper,
+                    &mut self.jac,
+                )
+                .map_err(|_| LsqError::NonFinite)?;
+            self.jacobians += 1;
+            self.secants_left = self.opt.secant_steps;
+        }
         if self.jac.iter().any(|v| !v.is_finite()) {
             return Err(LsqError::NonFinite);
         }
@@ -185,6 +194,24 @@ impl<'a, P: Problem + ?Sized> Solver<'a, P> {
             self.scale_inv[k] = self.scale_inv[k].max(col_norm(&self.jac, k));
         }
         Ok(())
+    }
+
+    /// Takes the trial point with Broyden's update of the Jacobian's secant columns
+    /// ([`Problem::secant_columns`]): `J += (df - J dx) dx_s^T / |dx_s|^2`, `dx_s` the step in
+    /// those columns' variables, so that the updated Jacobian maps the step to the residuals'
+    /// change.
+    fn secant_update(&mut self) {
+        let dx = &self.x_new - &self.x;
+        let mut r = &self.f_new - &self.f;
+        r.gemv(-1.0, &self.jac, &dx, 1.0);
+        let k = self.problem.secant_columns(dx.len()).min(dx.len());
+        let n2: f64 = dx.rows(0, k).norm_squared();
+        if n2 > 0.0 {
+            for c in 0..k {
+                self.jac.column_mut(c).axpy(dx[c] / n2, &r, 1.0);
+            }
+        }
+        self.take_trial();
     }
 
     /// The result at the current point.
