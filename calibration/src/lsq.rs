@@ -111,7 +111,8 @@ pub struct Options {
     /// Steps taken in a row after an evaluated Jacobian whose Jacobian is Broyden's rank-one
     /// update of the last one instead ([`Problem::secant_columns`]: the columns it may
     /// change; the others are the problem's own, constant); 0 (the default): every step
-    /// taken evaluates the Jacobian. Where a Jacobian costs more than an evaluation of the
+    /// taken evaluates the Jacobian. The Jacobian at the end ([`Options::jacobian_at_end`])
+    /// is evaluated, never a secant one. Where a Jacobian costs more than an evaluation of the
     /// residuals (a model solved iteratively, with its responses at every row), the steps
     /// after the first few move along directions the last Jacobian nearly has.
     pub secant_steps: usize,
@@ -316,7 +317,8 @@ pub fn solve<P: Problem + ?Sized>(
         if search.lowered_cost() && search.status.is_some() && !opt.jacobian_at_end {
             solver.take_trial();
         } else if search.lowered_cost() {
-            solver.accept_trial()?;
+            // The optimum's Jacobian is evaluated, never a secant one.
+            solver.accept_trial(search.status.is_some())?;
         } else if search.status.is_none() && solver.budget_spent() {
             break Status::MaxEvaluations;
         }

@@ -105,10 +105,11 @@ pub(crate) const SEARCH_ROWS: usize = 3000;
 /// reach the same cost in 3 or 4.
 const FIRST_RADIUS: f64 = 100.0;
 
-/// Steps of a search's refinement (not the one that reports the errors at the optimum) after
-/// each evaluated Jacobian whose effects' columns are Broyden's update of the last ones
-/// instead ([`pcr_calibration::lsq::Options::secant_steps`]; the calibration parameters'
-/// columns are the linearisation's own and stay exact): every second step. A Jacobian costs
+/// Steps of a refinement after each evaluated Jacobian whose effects' columns are Broyden's
+/// update of the last ones instead ([`pcr_calibration::lsq::Options::secant_steps`]; the
+/// calibration parameters' columns are the linearisation's own and stay exact, and the
+/// Jacobian at the optimum of the refinement that reports the errors is evaluated): every
+/// second step. A Jacobian costs
 /// the kinematics' responses at every refined row and a forward difference through the cheap
 /// stages of every row of the recording per parameter that moves the curvatures, 1.2-1.4
 /// evaluations of the model; the steps after the first follow directions the last Jacobian
@@ -963,7 +964,7 @@ pub(crate) fn refine_with_errors(
         stall_window: if at_optimum { 0 } else { STALL_STEPS },
         stall_ftol: STALL_FTOL,
         ftol_refused: true,
-        secant_steps: if at_optimum { 0 } else { SECANT_STEPS },
+        secant_steps: SECANT_STEPS,
         ..Options::default()
     };
     let started = std::time::Instant::now();

@@ -168,9 +168,11 @@ impl<'a, P: Problem + ?Sized> Solver<'a, P> {
     }
 
     /// Takes the trial point: its residuals, cost, Jacobian, gradient and the grown variable
-    /// scale. `Err` when the Jacobian cannot be evaluated there or is not finite.
-    pub(super) fn accept_trial(&mut self) -> Result<(), LsqError> {
-        if self.secants_left > 0 {
+    /// scale; the Jacobian evaluated where `exact` (the optimum's, for its errors) or no
+    /// secant step is left ([`Options::secant_steps`]). `Err` when the Jacobian cannot be
+    /// evaluated there or is not finite.
+    pub(super) fn accept_trial(&mut self, exact: bool) -> Result<(), LsqError> {
+        if self.secants_left > 0 && !exact {
             self.secants_left -= 1;
             self.secant_update();
         } else {
