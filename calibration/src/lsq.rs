@@ -109,7 +109,7 @@ pub struct Options {
     /// until one gains by chance.
     pub ftol_refused: bool,
     /// Steps taken in a row after an evaluated Jacobian whose Jacobian is Broyden's rank-one
-    /// update of the last one instead ([`Problem::secant_columns`]: the columns it may
+    /// update of the last one instead ([`Problem::secant_column`]: the columns it may
     /// change; the others are the problem's own, constant); 0 (the default): every step
     /// taken evaluates the Jacobian. The Jacobian at the end ([`Options::jacobian_at_end`])
     /// is evaluated, never a secant one. Where a Jacobian costs more than an evaluation of the
@@ -156,12 +156,12 @@ pub trait Problem {
         forward_difference(self, x, r, upper, j)
     }
 
-    /// The columns of the Jacobian a secant step may change ([`Options::secant_steps`]):
-    /// the first so many (the default: all of them). Where the residuals are linear in the
-    /// others (their columns constant), Broyden's update of the first ones alone keeps the
-    /// others exact and still meets the secant condition.
-    fn secant_columns(&self, n: usize) -> usize {
-        n
+    /// Whether a secant step may change column `c` of the Jacobian ([`Options::secant_steps`];
+    /// the default: every column). Where the residuals are linear in some parameters (their
+    /// columns constant), Broyden's update of the others alone keeps those exact and still
+    /// meets the secant condition.
+    fn secant_column(&self, _c: usize) -> bool {
+        true
     }
 }
 
@@ -559,8 +559,8 @@ mod tests {
             }
             Ok(())
         }
-        fn secant_columns(&self, _n: usize) -> usize {
-            2
+        fn secant_column(&self, c: usize) -> bool {
+            c < 2
         }
     }
 

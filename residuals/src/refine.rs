@@ -702,9 +702,10 @@ impl Problem for Refit<'_> {
         3 * self.n + self.nuisance.as_ref().map_or(0, Linearised::n)
     }
 
-    /// The effects' columns: the calibration parameters' are linear and constant.
-    fn secant_columns(&self, _n: usize) -> usize {
-        self.n_effects()
+    /// The effects' columns but the friction's: the calibration parameters' and the frozen
+    /// friction's values' columns are linear and constant ([`FrozenFriction`]).
+    fn secant_column(&self, c: usize) -> bool {
+        c < self.n_effects() && self.friction.as_ref().is_none_or(|f| f.column(c).is_none())
     }
 
     /// The full model's residuals at the effects' values, less the linearised change of the

@@ -199,18 +199,24 @@ impl<'a, P: Problem + ?Sized> Solver<'a, P> {
     }
 
     /// Takes the trial point with Broyden's update of the Jacobian's secant columns
-    /// ([`Problem::secant_columns`]): `J += (df - J dx) dx_s^T / |dx_s|^2`, `dx_s` the step in
-    /// those columns' variables, so that the updated Jacobian maps the step to the residuals'
-    /// change.
+    /// ([`Problem::secant_column`]): `J += (df - J dx) dx_s^T / |dx_s|^2`, `dx_s` the step in
+    /// those columns' variables (zero in the others'), so that the updated Jacobian maps the
+    /// step to the residuals' change.
     fn secant_update(&mut self) {
-        let dx = &self.x_new - &self.x;
+        let mut dx = &self.x_new - &self.x;
         let mut r = &self.f_new - &self.f;
         r.gemv(-1.0, &self.jac, &dx, 1.0);
-        let k = self.problem.secant_columns(dx.len()).min(dx.len());
-        let n2: f64 = dx.rows(0, k).norm_squared();
+        for (c, d) in dx.iter_mut().enumerate() {
+            if !self.problem.secant_column(c) {
+                *d = 0.0;
+            }
+        }
+        let n2 = dx.norm_squared();
         if n2 > 0.0 {
-            for c in 0..k {
-                self.jac.column_mut(c).axpy(dx[c] / n2, &r, 1.0);
+            for (c, d) in dx.iter().enumerate() {
+                if *d != 0.0 {
+                    self.jac.column_mut(c).axpy(d / n2, &r, 1.0);
+                }
             }
         }
         self.take_trial();
