@@ -523,6 +523,15 @@ mod tests {
         assert_eq!(without.jacobians, n_without);
     }
 
+    /// [`Exp`]'s analytic Jacobian into the first two columns of `j`.
+    fn exp_jacobian(x: &[f64], j: &mut DMatrix<f64>) {
+        for k in 0..20 {
+            let t = k as f64 / 10.0;
+            j[(k, 0)] = (x[1] * t).exp();
+            j[(k, 1)] = x[0] * t * (x[1] * t).exp();
+        }
+    }
+
     /// [`Exp`] with a third parameter the residuals are linear in (an offset along a fixed
     /// column, as the joint refinement's calibration parameters), its analytic Jacobian
     /// counted; the secant steps may change the first two columns.
@@ -551,10 +560,8 @@ mod tests {
             j: &mut DMatrix<f64>,
         ) -> Result<(), String> {
             self.0 += 1;
+            exp_jacobian(x, j);
             for k in 0..20 {
-                let t = k as f64 / 10.0;
-                j[(k, 0)] = (x[1] * t).exp();
-                j[(k, 1)] = x[0] * t * (x[1] * t).exp();
                 j[(k, 2)] = Self::column(k);
             }
             Ok(())
@@ -620,11 +627,7 @@ mod tests {
             _upper: &[f64],
             j: &mut DMatrix<f64>,
         ) -> Result<(), String> {
-            for k in 0..20 {
-                let t = k as f64 / 10.0;
-                j[(k, 0)] = (x[1] * t).exp();
-                j[(k, 1)] = x[0] * t * (x[1] * t).exp();
-            }
+            exp_jacobian(x, j);
             Ok(())
         }
     }
