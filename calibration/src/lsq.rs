@@ -112,7 +112,8 @@ pub struct Options {
     /// update of the last one instead ([`Problem::secant_column`]: the columns it may
     /// change; the others are the problem's own, constant); 0 (the default): every step
     /// taken evaluates the Jacobian. The Jacobian at the end ([`Options::jacobian_at_end`])
-    /// is evaluated, never a secant one. Where a Jacobian costs more than an evaluation of the
+    /// is evaluated, never a secant one; without it, [`Fit::jacobian`] (the point's before the
+    /// last step) may be. Where a Jacobian costs more than an evaluation of the
     /// residuals (a model solved iteratively, with its responses at every row), the steps
     /// after the first few move along directions the last Jacobian nearly has.
     pub secant_steps: usize,

@@ -845,9 +845,10 @@ pub(crate) enum Errors {
     /// None: a search's refinement, which ends where its cost stalls, re-linearises the
     /// friction once, and evaluates no Jacobian at its end.
     No,
-    /// A search's refinement with the errors from the Jacobian the solver last evaluated (at the
-    /// point before its last step) and the residuals where it ended: the scale of each
-    /// parameter's error, for a decision, not for a report.
+    /// A search's refinement with the errors from the Jacobian the solver last had (at the
+    /// point before its last step, evaluated or a secant one: [`SECANT_STEPS`]) and the
+    /// residuals where it ended: the scale of each parameter's error, for a decision, not for
+    /// a report.
     Approximate,
     /// The errors at the optimum, for the report: the solver evaluates the Jacobian there, has
     /// no stall test, and re-linearises the friction up to [`FRICTION_RELINEARISATIONS`] times.
