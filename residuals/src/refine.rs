@@ -106,17 +106,18 @@ pub(crate) const SEARCH_ROWS: usize = 3000;
 const FIRST_RADIUS: f64 = 100.0;
 
 /// Steps of a refinement after each evaluated Jacobian whose effects' columns are Broyden's
-/// update of the last ones instead ([`pcr_calibration::lsq::Options::secant_steps`]; the
-/// calibration parameters' columns are the linearisation's own and stay exact, and the
-/// Jacobian at the optimum of the refinement that reports the errors is evaluated): every
-/// second step. A Jacobian costs
-/// the kinematics' responses at every refined row and a forward difference through the cheap
-/// stages of every row of the recording per parameter that moves the curvatures, 1.2-1.4
-/// evaluations of the model; the steps after the first follow directions the last Jacobian
-/// nearly has. On springs + frame + backlash at 3x the 13 refinements evaluated 27 Jacobians
-/// instead of 46 and the model 60 times instead of 63 (2.23 s -> 1.76 s), the values within
-/// 0.001 of their errors and the approximate errors the same to three digits; two secant steps
-/// in a row took another 0.5 % off and moved the values more.
+/// update of the last ones instead ([`pcr_calibration::lsq::Options::secant_steps`]): every
+/// second step. The columns linear and constant in the refinement stay exact (the calibration
+/// parameters', and the frozen friction's values': updated too, they took up the plays'
+/// nonlinearity, and two plant tests of friction beside a play found plays of 5 steps for 3),
+/// and the Jacobian at the optimum of a refinement that reports its errors is evaluated. A
+/// Jacobian costs the kinematics' responses at every refined row and a forward difference
+/// through the cheap stages of every row of the recording per parameter that moves the
+/// curvatures, 1.2-1.4 evaluations of the model; the steps after the first follow directions
+/// the last Jacobian nearly has. On springs + frame + backlash at 3x the 13 refinements
+/// evaluated 27 Jacobians instead of 46 and the model 60 times instead of 63 (2.23 s -> 1.76
+/// s), the values within 0.001 of their errors and the approximate errors the same to three
+/// digits; two secant steps in a row took another 0.5 % off and moved the values more.
 const SECANT_STEPS: usize = 1;
 
 /// Most re-linearisations of the friction in a refinement that reports its errors
