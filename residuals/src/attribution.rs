@@ -1457,6 +1457,14 @@ fn within_linearisation(mut f: Fitted) -> Fitted {
 
 /// Scales the row changes `d` to half of [`LINEARISATION_MM`] at the largest when they exceed it.
 fn damp_within(d: &mut [[f64; 3]]) {
+    // Clearly within (the squares compared first: `hypot` costs a division and a root a
+    // row, and this runs on every row of every candidate).
+    let squares = d.iter().fold(0.0f64, |m, v| {
+        m.max(v[0] * v[0] + v[1] * v[1]).max(v[2] * v[2])
+    });
+    if squares < 0.99 * LINEARISATION_MM * LINEARISATION_MM {
+        return;
+    }
     let largest = d
         .iter()
         .fold(0.0f64, |m, v| m.max(v[0].hypot(v[1])).max(v[2].abs()));

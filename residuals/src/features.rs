@@ -4,6 +4,7 @@
 
 use crate::context::Context;
 use crate::series::Series;
+use rayon::prelude::*;
 use serde::Serialize;
 
 /// The feature names, in column order.
@@ -186,9 +187,9 @@ pub struct FeatureLink {
 
 /// Ranks the features by how much of the held-out residual a quadratic in each one explains.
 pub fn links(ctx: &Context, feats: &Features, train: &[usize], test: &[usize]) -> Vec<FeatureLink> {
-    let mut out = Vec::new();
     let comps = ["x", "y", "phi"];
-    for (j, name) in feats.names.iter().enumerate() {
+    // The features in parallel, each as it was alone.
+    let link = |j: usize, name: &String| -> Option<FeatureLink> {
         let mut ss_before = 0.0;
         let mut ss_after = 0.0;
         let mut best_corr = (0.0f64, 0usize);
@@ -198,7 +199,7 @@ pub fn links(ctx: &Context, feats: &Features, train: &[usize], test: &[usize]) -
         let mean = train.iter().map(|&i| fv(i)).sum::<f64>() / n;
         let sd = (train.iter().map(|&i| (fv(i) - mean).powi(2)).sum::<f64>() / n).sqrt();
         if sd.is_nan() || sd <= 0.0 {
-            continue;
+            return None;
         }
         let z = |i: usize| (fv(i) - mean) / sd;
         let (z_train, z_test): (Vec<f64>, Vec<f64>) = (
@@ -242,15 +243,19 @@ pub fn links(ctx: &Context, feats: &Features, train: &[usize], test: &[usize]) -
                 best_corr = (corr, c);
             }
         }
-        if ss_before > 0.0 {
-            out.push(FeatureLink {
-                feature: name.clone(),
-                held_out_r2: 1.0 - ss_after / ss_before,
-                correlation: best_corr.0,
-                component: comps[best_corr.1].into(),
-            });
-        }
-    }
+        (ss_before > 0.0).then(|| FeatureLink {
+            feature: name.clone(),
+            held_out_r2: 1.0 - ss_after / ss_before,
+            correlation: best_corr.0,
+            component: comps[best_corr.1].into(),
+        })
+    };
+    let mut out: Vec<FeatureLink> = feats
+        .names
+        .par_iter()
+        .enumerate()
+        .filter_map(|(j, name)| link(j, name))
+        .collect();
     out.sort_by(|a, b| b.held_out_r2.total_cmp(&a.held_out_r2));
     out
 }

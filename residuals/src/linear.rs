@@ -3,6 +3,7 @@
 
 use crate::context::Context;
 use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
 
 /// Design columns of one row: `cols[j]` is d(predicted, weighted pose)/d(param j).
 pub type Columns = Vec<[f64; 3]>;
@@ -24,7 +25,7 @@ pub fn solve(
     ctx: &Context,
     idx: &[usize],
     n: usize,
-    cols: &dyn Fn(usize, &mut Columns),
+    cols: &(dyn Fn(usize, &mut Columns) + Sync),
 ) -> Option<LinearFit> {
     solve_with_prior(ctx, idx, n, cols, None, None)
 }
@@ -51,7 +52,7 @@ pub fn solve_with_prior(
     ctx: &Context,
     idx: &[usize],
     n: usize,
-    cols: &dyn Fn(usize, &mut Columns),
+    cols: &(dyn Fn(usize, &mut Columns) + Sync),
     prior: Option<&[f64]>,
     offset: Option<&[[f64; 3]]>,
 ) -> Option<LinearFit> {
@@ -99,7 +100,7 @@ pub fn solve_joint(
     ctx: &Context,
     idx: &[usize],
     n_e: usize,
-    effect: &dyn Fn(usize, &mut Columns),
+    effect: &(dyn Fn(usize, &mut Columns) + Sync),
     table: &crate::nuisance::NuisanceTable,
     prior: Option<&[f64]>,
     offset: Option<&[[f64; 3]]>,
@@ -313,22 +314,35 @@ pub fn deltas(
     ctx: &Context,
     n: usize,
     x: &[f64],
-    cols: &dyn Fn(usize, &mut Columns),
+    cols: &(dyn Fn(usize, &mut Columns) + Sync),
     table: Option<&crate::nuisance::NuisanceTable>,
 ) -> Vec<[f64; 3]> {
-    let mut c: Columns = vec![[0.0; 3]; n];
+    // The effect's columns, then the nuisance's, each with its share of `x` (the sums in the
+    // order of the columns); the rows in parallel.
+    let (xe, xg) = x.split_at(n.min(x.len()));
     (0..ctx.rows.len())
-        .map(|i| {
-            cols(i, &mut c);
-            let nuisance = table.map_or(&[][..], |t| &t.cols[i]);
-            let mut d = [0.0; 3];
-            for (col, xa) in c.iter().chain(nuisance).zip(x) {
-                for k in 0..3 {
-                    d[k] += col[k] * xa;
+        .into_par_iter()
+        .map_init(
+            || vec![[0.0; 3]; n],
+            |c, i| {
+                cols(i, c);
+                let mut d = [0.0; 3];
+                let mut add = |col: &[f64; 3], xa: f64| {
+                    for k in 0..3 {
+                        d[k] += col[k] * xa;
+                    }
+                };
+                for (col, &xa) in c.iter().zip(xe) {
+                    add(col, xa);
                 }
-            }
-            d
-        })
+                if let Some(t) = table {
+                    for (col, &xa) in t.cols[i].iter().zip(xg) {
+                        add(col, xa);
+                    }
+                }
+                d
+            },
+        )
         .collect()
 }
 

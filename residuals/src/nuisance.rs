@@ -6,6 +6,7 @@
 use crate::model::Prediction;
 use pcr_kinematics::{Leg, Robot, TendonMap};
 use pcr_robot::{geometry as g, RobotConfig, Vec2};
+use rayon::prelude::*;
 
 /// The calibration parameters (the paper's step-1 and step-2 sets) as nuisance columns:
 /// per leg psi (deg), l_C (mm), the map coefficients, r_p (mm), theta_p (deg).
@@ -327,18 +328,30 @@ impl NuisanceTable {
         let nb = idx.iter().map(|&i| block(i) + 1).max().unwrap_or(1);
         // Each block's upper triangle, row by row in a flat vector (the same sums in the same
         // order as into a matrix, without its indexing).
-        let mut per: Vec<Option<Vec<f64>>> = vec![None; nb];
+        // The blocks in parallel, each over its rows in their order.
+        let mut members: Vec<Vec<usize>> = vec![Vec::new(); nb];
         for &i in idx {
-            let g = &self.cols[i][..n];
-            let m = per[block(i)].get_or_insert_with(|| vec![0.0; n * (n + 1) / 2]);
-            let mut at = 0;
-            for (a, ga) in g.iter().enumerate() {
-                for (v, gb) in m[at..at + n - a].iter_mut().zip(&g[a..]) {
-                    *v += ga[0] * gb[0] + ga[1] * gb[1] + ga[2] * gb[2];
-                }
-                at += n - a;
-            }
+            members[block(i)].push(i);
         }
+        let per: Vec<Option<Vec<f64>>> = members
+            .par_iter()
+            .map(|rows| {
+                (!rows.is_empty()).then(|| {
+                    let mut m = vec![0.0; n * (n + 1) / 2];
+                    for &i in rows {
+                        let g = &self.cols[i][..n];
+                        let mut at = 0;
+                        for (a, ga) in g.iter().enumerate() {
+                            for (v, gb) in m[at..at + n - a].iter_mut().zip(&g[a..]) {
+                                *v += ga[0] * gb[0] + ga[1] * gb[1] + ga[2] * gb[2];
+                            }
+                            at += n - a;
+                        }
+                    }
+                    m
+                })
+            })
+            .collect();
         let out: NuisanceGram = per
             .into_iter()
             .enumerate()

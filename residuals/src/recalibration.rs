@@ -79,6 +79,7 @@ fn options(config: &RobotConfig, recal: &Recalibration) -> CalOptions {
     CalOptions {
         function: Some(config.legs[0].tendon_map.model),
         every_function: false,
+        diagnose: false,
         frame: false,
         ..recal.options.clone()
     }

@@ -17,7 +17,7 @@ pub(crate) fn fit_joint(
     nui: &Nuisance,
     train: &[usize],
     n_e: usize,
-    effect: &dyn Fn(usize, &mut Columns),
+    effect: &(dyn Fn(usize, &mut Columns) + Sync),
     offset: Option<&[[f64; 3]]>,
 ) -> Option<JointFit> {
     let n_g = nui.n;
