@@ -74,23 +74,6 @@ struct PlayTerms {
     runs: Vec<Runs>,
     /// The sum of `|h_i|^2`.
     constant: f64,
-    /// The calibration parameters refitted with the play ([`Refit`]).
-    refit: Option<Refit>,
-}
-
-/// The calibration parameters (the nuisance's columns G, with their prior P) refitted with a
-/// play: the SSE of `h - g u` less what they take off, `v^T (G^T G + P)^-1 v` with
-/// `v = G^T (h - g u)`, from `G^T h` and, per row, `G_i^T g_i`. A large play bends the
-/// calibration the analysis starts from, which takes up part of it: profiled without them, the
-/// plays of 30 / 40 / 30 steps came out at 19 / 26 / 19, and a friction's supports, fitted with
-/// them, explained more than the play (backlash at 10x).
-struct Refit {
-    /// Per searched row, `G_i^T g_i`.
-    gg: Vec<Vec<f64>>,
-    /// `G^T h`.
-    gh: nalgebra::DVector<f64>,
-    /// `(G^T G + P)^-1`.
-    inv: nalgebra::DMatrix<f64>,
 }
 
 /// A series' input of one motor up to some row, as monotone runs: the input at its first row
@@ -139,16 +122,13 @@ impl Runs {
 
 impl PlayTerms {
     /// The terms of the rows `rows` of `ctx` for motor `m`: its input before the play `pre`
-    /// and the other motors' outputs `cur` (per series and row, steps). With `share` (the
-    /// rows' share of the training rows, which weighs the prior), the calibration parameters
-    /// are refitted with each trial play ([`Refit`]).
+    /// and the other motors' outputs `cur` (per series and row, steps).
     fn new(
         ctx: &Context,
         rows: &[usize],
         pre: &[Vec<[f64; 3]>],
         cur: &[Vec<[f64; 3]>],
         m: usize,
-        share: Option<f64>,
     ) -> PlayTerms {
         let mut ends = vec![0usize; pre.len()];
         for &i in rows {
@@ -167,13 +147,6 @@ impl PlayTerms {
             })
             .unzip();
         let mut constant = 0.0;
-        // The calibration parameters' columns, with the prior weighed by the searched rows'
-        // share of the training rows (`share`).
-        let table = share.map(|_| ctx.nuisance());
-        let n_g = table.as_ref().map_or(0, |t| t.nui.n);
-        let mut gtg = nalgebra::DMatrix::<f64>::zeros(n_g, n_g);
-        let mut gth = nalgebra::DVector::<f64>::zeros(n_g);
-        let mut gg_rows = Vec::new();
         let rows = rows
             .iter()
             .map(|&i| {
@@ -189,42 +162,14 @@ impl PlayTerms {
                 constant += h[0] * h[0] + h[1] * h[1] + h[2] * h[2];
                 let gh = g[0] * h[0] + g[1] * h[1] + g[2] * h[2];
                 let gg = g[0] * g[0] + g[1] * g[1] + g[2] * g[2];
-                if let Some(t) = &table {
-                    let c = &t.cols[i][..n_g];
-                    let dot = |a: &[f64; 3], b: &[f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-                    for (a, ca) in c.iter().enumerate() {
-                        gth[a] += dot(ca, &h);
-                        for (b, cb) in c.iter().enumerate().skip(a) {
-                            gtg[(a, b)] += dot(ca, cb);
-                        }
-                    }
-                    gg_rows.push(c.iter().map(|ca| dot(ca, &g)).collect());
-                }
                 let run = runs[row.s].offset + run_of[row.s][row.k];
                 (run, pre[row.s][row.k][m], q[m], gh, gg)
             })
             .collect();
-        let refit = table.and_then(|t| {
-            let prior = t.nui.prior();
-            let w = share.unwrap_or(1.0);
-            for a in 0..n_g {
-                for b in 0..a {
-                    gtg[(a, b)] = gtg[(b, a)];
-                }
-                gtg[(a, a)] += w * prior[a];
-            }
-            let inv = gtg.try_inverse()?;
-            Some(Refit {
-                gg: gg_rows,
-                gh: gth,
-                inv,
-            })
-        });
         PlayTerms {
             rows,
             runs,
             constant,
-            refit,
         }
     }
 
@@ -243,13 +188,11 @@ impl PlayTerms {
                 };
             }
         }
-        let mut v = self.refit.as_ref().map(|r| r.gh.clone());
-        let sse = self.constant
+        self.constant
             + self
                 .rows
                 .iter()
-                .enumerate()
-                .map(|(k, &(run, input, q, gh, gg))| {
+                .map(|&(run, input, q, gh, gg)| {
                     let (y, rises) = entries[run];
                     let out = if rises {
                         y.max(input - h)
@@ -257,20 +200,9 @@ impl PlayTerms {
                         y.min(input + h)
                     };
                     let u = out - q;
-                    if let (Some(v), Some(r)) = (v.as_mut(), self.refit.as_ref()) {
-                        if u != 0.0 {
-                            for (va, w) in v.iter_mut().zip(&r.gg[k]) {
-                                *va -= u * w;
-                            }
-                        }
-                    }
                     u * (u * gg - 2.0 * gh)
                 })
-                .sum::<f64>();
-        match (v, &self.refit) {
-            (Some(v), Some(r)) => sse - v.dot(&(&r.inv * &v)),
-            _ => sse,
-        }
+                .sum::<f64>()
     }
 }
 
@@ -297,8 +229,7 @@ impl Effect for Backlash {
     }
 
     /// Play of b_i steps on each motor: a profile over each motor's play in turn (two sweeps),
-    /// the calibration parameters refitted with each trial play ([`Refit`]), then the joint fit
-    /// with the calibration parameters at the plays found.
+    /// then the calibration parameters with the change at the plays found.
     fn fit(&self, ctx: &Context, train: &[usize]) -> Option<Fitted> {
         let e = &ctx.model.config.effects;
         let pre: Vec<Vec<[f64; 3]>> = ctx
@@ -307,7 +238,6 @@ impl Effect for Backlash {
             .map(|s| ctx.model.steps_before_play(s, e))
             .collect();
         let rows = search_rows(train);
-        let share = rows.len() as f64 / train.len().max(1) as f64;
         let delta_of = |b: [f64; 3], rows: Option<&[usize]>| -> Vec<[f64; 3]> {
             let q_new: Vec<Vec<[f64; 3]>> = pre
                 .iter()
@@ -352,7 +282,7 @@ impl Effect for Backlash {
         let mut entries = Vec::new();
         for _sweep in 0..2 {
             for m in 0..3 {
-                let terms = PlayTerms::new(ctx, &rows, &pre, &cur, m, Some(share));
+                let terms = PlayTerms::new(ctx, &rows, &pre, &cur, m);
                 let (x, s, curv) =
                     minimise_1d(&mut |v| terms.sse(v.max(0.0), &mut entries), &grid_of(m));
                 b[m] = x.max(0.0);
@@ -459,9 +389,7 @@ mod tests {
     }
 
     /// The profile's SSE at a play, from the rows' terms, is the SSE of the residuals after
-    /// the linearised pose change ([`motor_change`]) of the outputs through that play; with the
-    /// calibration parameters refitted ([`Refit`]), the least SSE over their change with their
-    /// prior (weighed by the share), solved directly.
+    /// the linearised pose change ([`motor_change`]) of the outputs through that play.
     #[test]
     fn the_play_terms_give_the_sse_of_the_linearised_change() {
         use crate::effects::profile::sse_at;
@@ -495,13 +423,8 @@ mod tests {
                 q
             })
             .collect();
-        let share = 0.25;
-        let table = ctx.nuisance();
-        let n_g = table.nui.n;
-        let prior = table.nui.prior();
         for m in 0..3 {
-            let terms = PlayTerms::new(&ctx, &rows, &pre, &cur, m, None);
-            let refit = PlayTerms::new(&ctx, &rows, &pre, &cur, m, Some(share));
+            let terms = PlayTerms::new(&ctx, &rows, &pre, &cur, m);
             for v in [0.0, 0.5, 2.0, 7.0] {
                 let out: Vec<Vec<f64>> = pre
                     .iter()
@@ -525,38 +448,12 @@ mod tests {
                             .collect()
                     })
                     .collect();
-                let change = motor_change(&ctx, &q_new, Some(&rows));
-                let want = sse_at(&ctx, &rows, &change);
+                let want = sse_at(&ctx, &rows, &motor_change(&ctx, &q_new, Some(&rows)));
                 let got = terms.sse(v, &mut Vec::new());
                 assert!(want > 0.0);
                 assert!(
                     (got - want).abs() <= 1e-9 * want,
                     "motor {m}, play {v}: {got} {want}"
-                );
-                // min |e - G d|^2 + share d^T P d, e the residual after the change.
-                let mut a = nalgebra::DMatrix::<f64>::zeros(3 * rows.len(), n_g);
-                let mut e = nalgebra::DVector::<f64>::zeros(3 * rows.len());
-                for (k, (&i, d)) in rows.iter().zip(&change).enumerate() {
-                    for c in 0..3 {
-                        e[3 * k + c] = ctx.rows[i].r[c] - d[c];
-                        for j in 0..n_g {
-                            a[(3 * k + c, j)] = table.cols[i][j][c];
-                        }
-                    }
-                }
-                let mut normal = a.transpose() * &a;
-                for j in 0..n_g {
-                    normal[(j, j)] += share * prior[j];
-                }
-                let d = normal.clone().lu().solve(&(a.transpose() * &e)).unwrap();
-                let residual = &e - &a * &d;
-                let want = residual.norm_squared()
-                    + share * (0..n_g).map(|j| prior[j] * d[j] * d[j]).sum::<f64>();
-                let got = refit.sse(v, &mut Vec::new());
-                assert!(want > 0.0 && want < sse_at(&ctx, &rows, &change));
-                assert!(
-                    (got - want).abs() <= 1e-7 * want,
-                    "refitted, motor {m}, play {v}: {got} {want}"
                 );
             }
         }
