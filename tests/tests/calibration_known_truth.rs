@@ -131,9 +131,10 @@ fn prototype_geometry_and_true_map_calibrate_down_to_the_noise() {
     assert!(cal.table1[cal.selected - 1].error.is_none());
 }
 
-/// A forced function fitted alone (`every_function: false`, as the residual analysis'
-/// calibrations from the drawing ask) gives the same robot to the bit as when the whole table
-/// is made, and the table's other rows say they were not fitted.
+/// A forced function fitted alone without the diagnosis (`every_function: false`,
+/// `diagnose: false`, as the residual analysis' calibrations from the drawing ask) gives the
+/// same robot to the bit as when the whole table is made, and the table's other rows say they
+/// were not fitted.
 #[test]
 fn a_forced_function_fitted_alone_gives_the_same_calibration() {
     let nominal = RobotConfig::nominal();
@@ -144,6 +145,7 @@ fn a_forced_function_fitted_alone_gives_the_same_calibration() {
     };
     let alone = Options {
         every_function: false,
+        diagnose: false,
         ..whole.clone()
     };
     let a = calibrate(&nominal, &rec, "known-truth", &whole).unwrap();
@@ -151,6 +153,13 @@ fn a_forced_function_fitted_alone_gives_the_same_calibration() {
     assert_eq!(a.selected, 2);
     assert_eq!(b.selected, 2);
     assert_eq!(a.robot, b.robot);
+    // The paper's set leaves this plant's B_i and l_st: the default diagnoses that, the
+    // calibration asked not to does not.
+    assert!(
+        a.diagnosis.is_some(),
+        "nothing to diagnose: the test would prove nothing"
+    );
+    assert!(b.diagnosis.is_none(), "diagnosed though asked not to");
     assert_eq!(a.after.train.m_rms_mm, b.after.train.m_rms_mm);
     assert_eq!(a.table1.len(), b.table1.len());
     for (x, y) in a.table1.iter().zip(&b.table1) {
@@ -295,4 +304,32 @@ fn the_paper_method_gives_the_two_steps_as_before() {
         jt <= test.pose.position_rms_mm,
         "joint {jt}, paper {test:?}"
     );
+}
+
+/// The legs' travels are kept per drawing and orientations (`leg_travels`): asked again for a
+/// drawing after another one, they are that drawing's, the same to the bit as made afresh, and
+/// another drawing has its own.
+#[test]
+fn the_kept_leg_travels_are_each_drawing_s_own() {
+    use pcr_calibration::calibrate::leg_travels;
+    use pcr_calibration::StaticData;
+    let nominal = RobotConfig::nominal();
+    let rec = static_recording(&geometry_and_map_plant(1.0, false), &nominal, 4, 0.05);
+    let data = StaticData::from_recording(&rec, "known-truth", 1, 1.0 / 3.0).unwrap();
+    let mut longer = nominal.clone();
+    for l in &mut longer.legs {
+        l.l_c_mm += 20.0;
+    }
+    let a = leg_travels(&nominal, &data);
+    let b = leg_travels(&longer, &data);
+    assert_ne!(a, b, "a longer segment bends less for the same travel");
+    assert_eq!(leg_travels(&nominal, &data), a);
+    assert_eq!(leg_travels(&longer, &data), b);
+    // More drawings than are kept, then the first again: made afresh, the same.
+    for k in 1..=5 {
+        let mut other = nominal.clone();
+        other.legs[0].psi_deg += 0.1 * k as f64;
+        leg_travels(&other, &data);
+    }
+    assert_eq!(leg_travels(&nominal, &data), a);
 }
