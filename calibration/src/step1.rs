@@ -485,15 +485,8 @@ pub fn map_coverage(
     lo: f64,
     hi: f64,
 ) -> Result<(), String> {
+    displacement_coverage(map, lo, hi)?;
     let [b_lo, b_hi] = map.invertible_range();
-    let m = 0.1 * (hi - lo).max(1e-3);
-    let (need_lo, need_hi) = (lo - m, hi + m);
-    if b_lo > need_lo || b_hi < need_hi || !is_monotonic(map, lo, hi) {
-        let turn = if b_lo > need_lo { b_lo } else { b_hi };
-        return Err(format!(
-            "the map turns back at dl = {turn:.2} mm: it is monotonic on [{b_lo:.2}, {b_hi:.2}] mm, but the leg's travel in the data needs [{need_lo:.2}, {need_hi:.2}] mm (the data's range widened by 10 %)"
-        ));
-    }
     let mk = 0.1 * (travel[1] - travel[0]).abs();
     let (k_lo, k_hi) = (travel[0] - mk, travel[1] + mk);
     if map.dl_for_kappa(k_lo).is_err() || map.dl_for_kappa(k_hi).is_err() {
@@ -505,6 +498,22 @@ pub fn map_coverage(
             deg(k_hi),
             deg(a.min(b)),
             deg(a.max(b)),
+        ));
+    }
+    Ok(())
+}
+
+/// The first half of [`map_coverage`]: whether a map is strictly monotonic over the
+/// displacements `[lo, hi]` (mm) widened by 10 % of the span each side, on its monotonic branch
+/// around dl = 0 (where its inverse searches). The error says where it turns back.
+pub fn displacement_coverage(map: &TendonMap, lo: f64, hi: f64) -> Result<(), String> {
+    let [b_lo, b_hi] = map.invertible_range();
+    let m = 0.1 * (hi - lo).max(1e-3);
+    let (need_lo, need_hi) = (lo - m, hi + m);
+    if b_lo > need_lo || b_hi < need_hi || !is_monotonic(map, lo, hi) {
+        let turn = if b_lo > need_lo { b_lo } else { b_hi };
+        return Err(format!(
+            "the map turns back at dl = {turn:.2} mm: it is monotonic on [{b_lo:.2}, {b_hi:.2}] mm, but the leg's travel in the data needs [{need_lo:.2}, {need_hi:.2}] mm (the data's range widened by 10 %)"
         ));
     }
     Ok(())
@@ -541,8 +550,40 @@ pub fn is_monotonic(map: &TendonMap, lo: f64, hi: f64) -> bool {
         }
         prev = v;
     }
+    // Near dl = 0 too, on a log scale: the root families' terms change fastest there, and a
+    // fit can turn a map back in a dip far narrower than the grid (a sixth-root map whose
+    // curvature fell from -1e-4 to -0.035 1/mm within a few thousandths of a mm of dl = 0). A
+    // turn back by less than the map's mean slope over one interval of the grid is one the grid
+    // would not have seen either (a root map whose slope changes sign a few thousandths of a mm
+    // from zero): its inverse errs by less than that interval.
+    let h = (b - a) / n as f64;
+    let tolerance = ((map.kappa(b) - map.kappa(a)) / (b - a)).abs() * h;
+    if a < 0.0 && b > 0.0 {
+        let mut xs: Vec<f64> = std::iter::successors(Some(NEAR_ZERO_MM), |x| {
+            Some(x * NEAR_ZERO_RATIO).filter(|&y| y < h)
+        })
+        .flat_map(|x| [-x, x])
+        .filter(|&x| x > a && x < b)
+        .collect();
+        xs.push(0.0);
+        xs.sort_by(f64::total_cmp);
+        let mut extreme = f64::NEG_INFINITY;
+        for x in xs {
+            let v = sign * map.kappa(x);
+            if !v.is_finite() || v < extreme - tolerance {
+                return false;
+            }
+            extreme = extreme.max(v);
+        }
+    }
     true
 }
+
+/// The smallest |dl| (mm) [`is_monotonic`] looks at near dl = 0, a millionth of a step.
+const NEAR_ZERO_MM: f64 = 1e-8;
+
+/// The ratio of two points of [`is_monotonic`]'s log scale near dl = 0 (four a decade).
+const NEAR_ZERO_RATIO: f64 = 1.778_279_410_038_923;
 
 /// The unit of coefficient `j` of a family (kappa in 1/mm, dl in mm).
 pub fn coeff_unit(kind: TendonMapKind, j: usize) -> String {
@@ -618,6 +659,42 @@ pub(crate) fn describe(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A leg-1 map of the prototype plant's small loop (an asymmetric sixth-root map refitted by
+    /// the residual analysis), with a dip a few thousandths of a mm wide at dl = 0, where the
+    /// roots' terms change fastest, so that its inverse put every small negative bending on the
+    /// positive side (the extended circle held that motor at -1 step for -68). Over
+    /// [-1.4, 7.66] mm the 800 points of the grid step over the dip; the log scale near zero
+    /// does not.
+    #[test]
+    fn a_dip_at_zero_narrower_than_the_grid_is_not_monotonic() {
+        let spec = TendonMapSpec {
+            model: TendonMapKind::Root6,
+            reading: pcr_robot::MapReading::Asymmetric,
+            coeffs: vec![
+                -0.03470458163665878,
+                0.00013819822938429015,
+                0.0930112682812078,
+                -1.1471095520998265,
+                4.3172750585611,
+                -6.136632043454229,
+                2.9090297827252733,
+            ],
+            coeffs_neg: vec![
+                0.0023475792554761995,
+                -0.09462406227769143,
+                1.1340708145622584,
+                -4.245886576382241,
+                6.03275792141117,
+                -2.8621659779806174,
+            ],
+        };
+        let map = TendonMap::from_spec(&spec);
+        for hi in [7.6, 7.66] {
+            assert!(!is_monotonic(&map, -1.4, hi), "{hi}");
+            assert!(displacement_coverage(&map, -1.4, hi).is_err(), "{hi}");
+        }
+    }
 
     /// Observations of a leg with a known map and geometry, with a deterministic "noise".
     fn synthetic(truth: &LegConfig, noise: f64) -> Vec<LegObservation> {

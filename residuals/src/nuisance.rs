@@ -174,6 +174,38 @@ impl Nuisance {
     }
 }
 
+/// Why a leg's map of `robot` cannot be inverted over the tendon displacements the recordings
+/// `series` command (`None` when every leg's can): strictly monotonic over each leg's range of
+/// commanded displacements widened by 10 %, on its branch around dl = 0
+/// ([`pcr_calibration::step1::displacement_coverage`]). A calibration refits the maps on the
+/// static poses, a refinement on a few thousand rows: neither sees every displacement the paths
+/// command, and a sixth-root map refitted so turned back just below dl = 0 (the prototype
+/// plant's small loop: the extended circle stopped a motor at -1 step for -68).
+pub(crate) fn map_refusal(robot: &RobotConfig, series: &[crate::series::Series]) -> Option<String> {
+    let mut range = [[f64::INFINITY, f64::NEG_INFINITY]; 3];
+    for x in series.iter().flat_map(|s| &s.samples) {
+        for (r, q) in range.iter_mut().zip(x.q) {
+            if q.is_finite() {
+                r[0] = r[0].min(q);
+                r[1] = r[1].max(q);
+            }
+        }
+    }
+    robot
+        .legs
+        .iter()
+        .zip(range)
+        .enumerate()
+        .filter(|(_, (_, r))| r[0] <= r[1])
+        .find_map(|(i, (leg, r))| {
+            let mm = leg.actuation.mm_per_step();
+            let map = pcr_kinematics::TendonMap::from_spec(&leg.tendon_map);
+            pcr_calibration::step1::displacement_coverage(&map, r[0] * mm, r[1] * mm)
+                .err()
+                .map(|e| format!("leg {}: {e}", i + 1))
+        })
+}
+
 /// The calibration parameters' changes of a loaded model: the robot changed by a small step in
 /// each parameter (through [`Nuisance::apply`], as a fit applies it), with its springs' rest
 /// angles. Under loads the rigid columns of [`Nuisance::columns`] are wrong: springs stiffen

@@ -61,6 +61,15 @@ pub fn recalibrated(
         Some(c) => c,
         None => calibrate_data(drawing, framed.as_ref().unwrap_or(&data), &opts).ok()?,
     };
+    // Its maps must stay invertible over every row's displacements, as the first
+    // calibration's over its poses and the map candidate's over the rows: the static poses
+    // alone may not reach where the paths go (on the prototype plant's small loop, a leg's
+    // asymmetric sixth-root map refitted here turned back just below dl = 0, and the extended
+    // circle, which bends that leg the other way, stopped its motor at -1 step for -68).
+    if let Some(why) = crate::nuisance::map_refusal(&cal.robot, ctx.series) {
+        tracing::debug!(why, "calibration from the drawing refused");
+        return None;
+    }
     let mut out = cal.robot;
     out.name = config.name.clone();
     out.effects = config.effects.clone();

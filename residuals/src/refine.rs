@@ -1023,11 +1023,19 @@ pub(crate) fn refine_with_errors(
     );
     match fit {
         Ok(fit) => {
+            let out = p.config(&fit.x);
+            // The maps' coefficients move with the calibration parameters: a refinement that
+            // turns a map back within the recordings' displacements (which the refined rows
+            // need not show) is not taken ([`crate::nuisance::map_refusal`]).
+            if let Some(why) = crate::nuisance::map_refusal(&out, series) {
+                tracing::debug!(why, "joint refinement refused");
+                return (config.clone(), None);
+            }
             let errors = match errors {
                 Errors::No => None,
                 Errors::Approximate | Errors::AtOptimum => p.errors(&fit, blocks),
             };
-            (p.config(&fit.x), errors)
+            (out, errors)
         }
         Err(_) => (config.clone(), None),
     }
