@@ -71,7 +71,7 @@ def creep_truth(compliance):
 
 # Physical effects of the residual library and its recalibrations (which absorb, not explain).
 LIBRARY = ["backlash", "latency", "creep", "drift", "joint_springs", "external_load", "frame",
-           "periodic", "friction"]
+           "periodic", "friction", "friction_supports"]
 RECALIBRATIONS = ["geometry", "tendon_map"]
 # Library effects the calibration's own parameters can take in whole: a rigid error of the
 # capture frame is, to within the noise, a change of the legs' base angles and lengths within
@@ -166,6 +166,15 @@ EFFECTS = {
                    ("friction", "supports", "true"), ("friction", "support_force_n", repr(0.04 * f))],
         lambda f: {"joint torque": 2.0 * f, "support force": 0.04 * f},
         lambda f: "joints %s N mm, supports %s N" % (fmt_num(2 * f), fmt_num(0.04 * f))),
+    # The supports alone (the joints turn freely): a hysteresis of the pose at each reversal
+    # that a gear play imitates (docs/residuals.md, "Friction"). The library names it friction,
+    # the joints' limit held at zero.
+    "friction_supports": Effect(
+        "friction", "the prototype's supports alone: 0.04 N",
+        lambda f: [("friction", "joints", "false"),
+                   ("friction", "supports", "true"), ("friction", "support_force_n", repr(0.04 * f))],
+        lambda f: {"joint torque": 0.0, "support force": 0.04 * f},
+        lambda f: "supports alone %s N" % fmt_num(0.04 * f)),
     # Outside the library.
     "cross_coupling": Effect(
         "cross_coupling", "15 %",
@@ -182,13 +191,26 @@ EFFECTS = {
 # Strengths per library effect (factors of today's test value): one below detection, the test
 # value, 3x and 10x. Where the plant cannot hold 10x in its working range the sweep steps down
 # through FALLBACK and says which it used.
-# Known failures: cases whose rules today's analysis does not hold, with why (docs/residuals.md,
-# "Validation"). --check reports their failures as expected instead of failing on them, and says
-# so when one passes; every other case must hold every rule.
-EXPECTED_FAILURES: dict = {}
+# Known failures: per case, the rule today's analysis does not hold there (a part of the failure's
+# text) and why (docs/residuals.md, "Validation"). --check reports such failures as expected
+# instead of failing on them, and says so when the case passes; every other rule of the case, and
+# every other case, must hold.
+EXPECTED_FAILURES: dict = {
+    "backlash+friction_supports-3x": (
+        "cpu on one core",
+        "the supports alone beside a play: the friction, taken in first, takes part of the play "
+        "and the play enters through the full model (10-10.5 s)"),
+}
+
+
+def unexpected_failures(r):
+    """A run's failures that EXPECTED_FAILURES does not expect."""
+    rule = EXPECTED_FAILURES.get(r["case"], (None,))[0]
+    return [f for f in r["failures"] if rule is None or rule not in f]
 
 LOW = {"backlash": 0.1, "latency": 0.1, "creep": 0.1, "drift": 0.1, "joint_springs": 0.1,
-       "external_load": 0.1, "frame": 0.1, "periodic": 0.1, "friction": 0.1}
+       "external_load": 0.1, "frame": 0.1, "periodic": 0.1, "friction": 0.1,
+       "friction_supports": 0.1}
 FALLBACK = [7.0, 5.0, 4.0]
 
 
@@ -232,7 +254,8 @@ def cases(reduced: bool) -> list:
     out.append(Case("drift-0.002", [("drift", 0.002 / 3e-4)], "drift-long", full_size=True,
                     cal_options=["--phis-deg", "0,10", "--settle", "2.0"]))
     pairs = [("backlash", "latency"), ("joint_springs", "external_load"), ("drift", "creep"),
-             ("backlash", "friction"), ("backlash", "external_load"), ("periodic", "frame")]
+             ("backlash", "friction"), ("backlash", "external_load"), ("periodic", "frame"),
+             ("backlash", "friction_supports")]
     triples = [("backlash", "latency", "creep"), ("external_load", "drift", "periodic"),
                ("joint_springs", "frame", "backlash")]
     if reduced:
@@ -685,10 +708,10 @@ def evaluate(case, seed, conv, factors, res, t, floor, rows, err, args):
     run["after_floor"] = after / floor if after is not None and floor else None
     failures = []
     lib = case.library_effects()
-    truth_names = {e for e, _ in lib}
+    truth_names = {EFFECTS[e].name for e, _ in lib}
     for e, _ in lib:
         f = factors[e]
-        found = e in physical
+        found = EFFECTS[e].name in physical
         run["detected"][e] = found
         at_test = f >= 1.0 - 1e-9
         if not found:
@@ -741,7 +764,7 @@ def compare_params(e, f, res, factors=None):
         # of it: the elongation grows at rate / (1 + c k) (the creep's feedback, above).
         ck = 2e-3 * factors["creep"] * CREEP_K_N_PER_MM
         truth = {k: v / (1.0 + ck) for k, v in truth.items()}
-    entries = [x for x in res.get("effects", []) if x["name"] == e]
+    entries = [x for x in res.get("effects", []) if x["name"] == EFFECTS[e].name]
     params = {}
     if e == "periodic":
         # The term on the true motor with the largest amplitude (periodic may be named twice).
@@ -774,6 +797,9 @@ def compare_params(e, f, res, factors=None):
                 row["z"] = 0.0 if abs(diff) < 0.5 else float("inf")
             elif std:
                 row["z"] = abs(diff) / std
+            elif diff == 0.0:
+                # A limit held at its bound (zero, no error) where the truth is that bound.
+                row["z"] = 0.0
         out.append(row)
     return out
 
@@ -805,7 +831,7 @@ def aggregate(case_list, runs, factors, notes):
         absorbed = {e: sum(1 for r in rs if e in r.get("absorbed", [])) for e, _ in c.library_effects()}
         false = {}
         for r in rs:
-            truth_names = {e for e, _ in c.library_effects()}
+            truth_names = {EFFECTS[e].name for e, _ in c.library_effects()}
             for nme in set(r["named"]) - truth_names:
                 false[nme] = false.get(nme, 0) + 1
         params = {}
@@ -1045,8 +1071,8 @@ def main(argv=None):
     (out / "validation.json").write_text(json.dumps(
         {"meta": meta, "limits": limits, "cases": aggs, "runs": runs}, indent=1, default=str))
     write_csv(out / "runs.csv", runs)
-    expected = [r for r in runs if r["failures"] and r["case"] in EXPECTED_FAILURES]
-    failing = [r for r in runs if r["failures"] and r["case"] not in EXPECTED_FAILURES]
+    expected = [r for r in runs if r["failures"] and not unexpected_failures(r)]
+    failing = [r for r in runs if unexpected_failures(r)]
     passing_expected = sorted({r["case"] for r in runs if not r["failures"]} &
                               set(EXPECTED_FAILURES) - {r["case"] for r in expected})
     missing = [a_ for a_ in aggs if not a_["n"]]
@@ -1058,13 +1084,13 @@ def main(argv=None):
     for r in expected:
         print("  expected failure: %s s%d %s: %s (%s)" % (
             r["case"], r["seed"], r["convention"], "; ".join(r["failures"]),
-            EXPECTED_FAILURES[r["case"]]))
+            EXPECTED_FAILURES[r["case"]][1]))
     for c in passing_expected:
         print("  %s holds every rule now: take it off EXPECTED_FAILURES" % c)
     if a.check:
         rules = {}
         for r in failing:
-            for f in r["failures"]:
+            for f in unexpected_failures(r):
                 key = re.sub(r"[-+]?\d+(\.\d+)?", "#", f)
                 rules.setdefault(key, []).append("%s s%d %s: %s" % (
                     r["case"], r["seed"], r["convention"], f))

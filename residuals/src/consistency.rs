@@ -168,6 +168,14 @@ pub fn disagreements(whole: &[Estimate], a: &[Estimate], b: &[Estimate]) -> Vec<
             // which the acceptance's refinement then moved): apart by Z combined errors and
             // by REL of the larger.
             (None, Some(sa), Some(sb)) => diff > Z * sa.hypot(sb) && diff > REL * larger,
+            // Held at its bound in one part and fitted in the other (a friction's joints at
+            // zero in one half, 0.08 +- 0.05 N mm in the other, on supports' friction alone;
+            // 0.12 +- 0.034 with the supports at 10x): the held value as uncertain as the
+            // fitted one (its estimate was cut at the bound), apart by Z combined errors and by
+            // REL of the larger.
+            (None, Some(s), None) | (None, None, Some(s)) => {
+                diff > Z * std::f64::consts::SQRT_2 * s && diff > REL * larger
+            }
             // A searched or fixed one (a motor, a period): the same value.
             (None, _, _) => diff > 0.02 * larger.max(1e-12),
             _ => false,
@@ -239,5 +247,24 @@ mod tests {
             .len(),
             1
         );
+    }
+
+    /// A limit held at its bound (zero, no error) in one part and fitted in the other is judged
+    /// with the held value as uncertain as the fitted one: 0.08 +- 0.05 and 0.12 +- 0.034 agree
+    /// with zero, 0.8 +- 0.05 does not. (It was judged as a searched value, which must be the
+    /// same to 2 %: a friction in the supports alone was refused for joints of 0 against
+    /// 0.081 +- 0.049 N mm, and at 10x for 0.12 +- 0.034 against 0.)
+    #[test]
+    fn a_limit_held_at_zero_in_one_part_is_judged_on_the_other_s_error() {
+        let whole = [e("joint torque", 0.0, None)];
+        let held = [e("joint torque", 0.0, None)];
+        let near = [e("joint torque", 0.08, Some(0.05))];
+        let closer = [e("joint torque", 0.1227, Some(0.034))];
+        assert!(disagreements(&whole, &held, &closer).is_empty());
+        let far = [e("joint torque", 0.8, Some(0.05))];
+        assert!(disagreements(&whole, &held, &near).is_empty());
+        assert!(disagreements(&whole, &near, &held).is_empty());
+        assert_eq!(disagreements(&whole, &held, &far).len(), 1);
+        assert_eq!(disagreements(&whole, &far, &held).len(), 1);
     }
 }

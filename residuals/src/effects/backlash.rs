@@ -50,6 +50,42 @@ fn play_on(q: &[[f64; 3]], m: usize, b: f64, out: &mut [f64]) {
     }
 }
 
+/// The play a column of [`play_columns`] is taken at (steps): the change per step of play
+/// from the model's plays to this much more, each motor alone.
+const PROBE_STEPS: f64 = 2.0;
+
+/// Per measured row of `ctx`, the change of its pose (orientation weighted) per step of play on
+/// each motor, about the model's plays ([`PROBE_STEPS`] more on that motor alone, linearised
+/// through each row's Jacobian): what a gear play takes up where another hysteresis is fitted
+/// beside it ([`crate::effects::friction`]'s supports from no friction).
+pub(crate) fn play_columns(ctx: &Context) -> Vec<[[f64; 3]; 3]> {
+    let e = &ctx.model.config.effects;
+    let held = e.backlash.as_ref().map_or([0.0; 3], |b| b.steps);
+    let pre: Vec<Vec<[f64; 3]>> = ctx
+        .series
+        .iter()
+        .map(|s| ctx.model.steps_before_play(s, e))
+        .collect();
+    let per_motor: Vec<Vec<[f64; 3]>> = (0..3)
+        .map(|m| {
+            let mut steps = held;
+            steps[m] += PROBE_STEPS;
+            let q_new: Vec<Vec<[f64; 3]>> = pre
+                .iter()
+                .map(|q| {
+                    let mut q = q.clone();
+                    apply(&mut q, &robot::Backlash { steps });
+                    q
+                })
+                .collect();
+            motor_change(ctx, &q_new, None)
+        })
+        .collect();
+    (0..ctx.rows.len())
+        .map(|i| std::array::from_fn(|m| per_motor[m][i].map(|v| v / PROBE_STEPS)))
+        .collect()
+}
+
 /// What a profile over one motor's play reads of each searched row, so that the training
 /// SSE at a play is a few products per searched row and a step per monotone run of the motor's
 /// input, instead of the play run through every row and a linearised pose change per row

@@ -146,7 +146,32 @@ struct Step {
     /// The tangent pass it was linearised with, per series, where it skipped the series
     /// without training rows ([`Scope::Training`]): what [`Scope::Complete`] takes again.
     partial: Option<std::sync::Arc<Vec<Tangents>>>,
+    /// Columns fitted beside the friction's and the calibration's and left out of its change
+    /// (a play's, [`Beside`]).
+    beside: usize,
 }
+
+/// Per measured row, the change of the pose per step of play on each motor
+/// ([`crate::effects::backlash::play_columns`]): fitted beside the limits' derivatives at zero
+/// in the first step from no friction while the model holds no play, and left out of the
+/// friction's change. A play and the supports' friction are both a hysteresis of the pose at
+/// each reversal, and the derivatives at zero see no stuck element holding: beside an unmodelled
+/// play of 3-4 steps with the joints' and the supports' friction at 3x, the joints' first step
+/// went below zero, and the supports, fitted alone from there, took the joints' couple and the
+/// play (0.195 N for 0.12; no play was named); beside the plays' columns it was 1.2 N mm and
+/// 0.049 N, and the analysis went on to name both with their values
+/// (`finds_friction_beside_backlash_and_tells_them_apart`). On a play alone the supports' first step beside it is
+/// nothing (1e-6 N), and the fit stops there, without a pass with the derivatives. The steps
+/// after the first keep them while the joints' limit is held at zero (the supports alone, the
+/// friction most like a play), and have none where the joints rub (beside every step,
+/// backlash + friction 3x took 15 % more time for the same result).
+type Beside = Vec<[[f64; 3]; BESIDE]>;
+
+/// Columns beside the friction's ([`Beside`]): a play on each motor. (A delay's column beside
+/// them too kept the supports alone from taking up part of a 120 ms latency beside a play,
+/// which costs backlash + latency 3x a quarter more time, 3.7 s; but on backlash + friction 3x
+/// the play then won the first round and the supports' force came out 4.5 errors off.)
+const BESIDE: usize = 3;
 
 /// The rows a step's tangent pass must answer.
 #[derive(Clone, Copy)]
@@ -188,6 +213,7 @@ fn step_at(
     held: [bool; 3],
     scope: Scope,
     onset: &Onset,
+    beside: Option<&Beside>,
 ) -> Option<Step> {
     let n = ctx.rows.len();
     let rubs = theta[0] != 0.0 || theta[1] != 0.0;
@@ -230,23 +256,21 @@ fn step_at(
             *onset.borrow_mut() = Some((theta, per.clone()));
             per
         });
-        // Both limits' columns, the joints' first. The fit below reads the first `free.len()`
-        // of them: where the joints' limit is held at zero (its first step went below), the
-        // supports are fitted on the joints' column. That is a known fault, kept for now:
-        // fitted on their own column, the supports alone imitate a play well enough to win the
-        // first round beside a backlash, take it in whole on the prototype plant (`pcr loop`
-        // named friction alone, supports 0.097 N, and no play) and cost backlash at 10x four
-        // times the time before the backward pass takes them out. With it, friction in the
-        // supports alone is named a backlash and a latency
-        // (`finds_friction_in_the_supports_alone`, ignored until the two are told apart;
-        // docs/residuals.md, "Friction").
+        // The columns of the limits fitted, in `free`'s order: where the joints' limit is held
+        // at zero (its first step went below), the supports on their own column (they were
+        // fitted on the joints' column once, and friction in the supports alone was named a
+        // backlash and a latency, plays of 5.1-5.2 steps).
         let cols = ctx
             .rows
             .iter()
             .map(|r| {
-                per[r.s][r.k].map_or(vec![[0.0; 3]; 2], |c| {
-                    c.iter().map(|d| [d[0], d[1], ctx.w_phi * d[2]]).collect()
-                })
+                let c = per[r.s][r.k].unwrap_or([[0.0; 3]; 2]);
+                free.iter()
+                    .map(|&j| {
+                        let d = c[j];
+                        [d[0], d[1], ctx.w_phi * d[2]]
+                    })
+                    .collect()
             })
             .collect();
         let offset = (0..n).map(|i| diff(Some([0.0; 3]), at[i])).collect();
@@ -298,15 +322,40 @@ fn step_at(
             .collect();
         (offset, cols)
     };
-    let n_e = free.len();
+    let n_free = free.len();
+    let n_e = n_free + beside.map_or(0, |_| BESIDE);
     let effect = |i: usize, c: &mut Columns| {
         for (a, &j) in free.iter().enumerate() {
             c[a] = cols[i][a].map(|v| v * SCALE[j]);
         }
+        if let Some(b) = beside {
+            c[n_free..n_free + BESIDE].copy_from_slice(&b[i]);
+        }
     };
     let nui = ctx.nuisance().nui.clone();
     let moved = offset.iter().any(|o| *o != [0.0; 3]);
-    let fit = fit_joint(ctx, &nui, train, n_e, &effect, moved.then_some(&offset[..]))?;
+    let mut fit = fit_joint(ctx, &nui, train, n_e, &effect, moved.then_some(&offset[..]))?;
+    if let Some(b) = beside {
+        // The friction's change and the calibration's, the plays' left out: what the supports
+        // explain beyond a play, and its training error.
+        let plays = |x: &[f64]| -> [f64; BESIDE] { std::array::from_fn(|m| x[n_free + m]) };
+        let take_out = |delta: &mut [[f64; 3]], p: [f64; BESIDE]| {
+            for (d, c) in delta.iter_mut().zip(b) {
+                for (k, dk) in d.iter_mut().enumerate() {
+                    *dk -= (0..BESIDE).map(|m| p[m] * c[m][k]).sum::<f64>();
+                }
+            }
+        };
+        take_out(&mut fit.1, plays(&fit.0.x));
+        if !moved {
+            fit.2 = crate::linear::solve(ctx, train, n_e, &effect).map(|f| {
+                let mut d = crate::linear::deltas(ctx, n_e, &f.x, &effect, None);
+                take_out(&mut d, plays(&f.x));
+                d
+            });
+        }
+        fit.0.sse = ctx.sse(train, Some(&fit.1));
+    }
     let mut x = [0.0; 3];
     let mut sd = [None; 3];
     for (a, &j) in free.iter().enumerate() {
@@ -318,6 +367,7 @@ fn step_at(
         x,
         sd,
         partial: pass,
+        beside: n_e - n_free,
     })
 }
 
@@ -357,7 +407,30 @@ fn fit_from(
         Scope::All
     };
     let onset = Onset::default();
-    let mut step = step_at(ctx, train, &entry, &at, theta, bound, scope, &onset)?;
+    // A play's columns beside the first step from no friction, and beside the steps after it
+    // while the joints' limit is held at zero ([`Beside`]).
+    let candidate = steps > 1
+        && start.is_none()
+        && theta[0] == 0.0
+        && theta[1] == 0.0
+        && ctx.model.config.effects.backlash.is_none();
+    let plays: Option<Beside> = candidate.then(|| crate::effects::backlash::play_columns(ctx));
+    let beside = |theta: Theta, bound: [bool; 3]| {
+        plays
+            .as_ref()
+            .filter(|_| bound[0] || (theta[0] == 0.0 && theta[1] == 0.0))
+    };
+    let mut step = step_at(
+        ctx,
+        train,
+        &entry,
+        &at,
+        theta,
+        bound,
+        scope,
+        &onset,
+        beside(theta, bound),
+    )?;
     // The training error the calibration parameters alone leave (what a friction's step must
     // improve on).
     let sse0 = || {
@@ -373,7 +446,17 @@ fn fit_from(
             if bound[0] && bound[1] {
                 return None;
             }
-            step = step_at(ctx, train, &entry, &at, theta, bound, scope, &onset)?;
+            step = step_at(
+                ctx,
+                train,
+                &entry,
+                &at,
+                theta,
+                bound,
+                scope,
+                &onset,
+                beside(theta, bound),
+            )?;
             continue;
         }
         let sse = step.fit.0.sse;
@@ -396,7 +479,17 @@ fn fit_from(
             break;
         }
         theta = next;
-        step = step_at(ctx, train, &entry, &at, theta, bound, scope, &onset)?;
+        step = step_at(
+            ctx,
+            train,
+            &entry,
+            &at,
+            theta,
+            bound,
+            scope,
+            &onset,
+            beside(theta, bound),
+        )?;
     }
     if let Some(done) = step.partial.take() {
         step = step_at(
@@ -408,9 +501,12 @@ fn fit_from(
             bound,
             Scope::Complete(&done),
             &onset,
+            beside(theta, bound),
         )?;
     }
-    let Step { fit, x, sd, .. } = step;
+    let Step {
+        fit, x, sd, beside, ..
+    } = step;
     let (lin, delta, alone) = fit;
     let value = [theta[0] + x[0], theta[1] + x[1], stepped(theta, x)[2]];
     let new = with_values(&entry, value);
@@ -436,7 +532,7 @@ fn fit_from(
     Some(Fitted {
         name: "friction",
         params,
-        k: n_e,
+        k: n_e - beside,
         delta,
         alone,
         train_sse: lin.sse,
