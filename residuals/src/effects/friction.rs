@@ -420,17 +420,20 @@ fn fit_from(
             .as_ref()
             .filter(|_| bound[0] || (theta[0] == 0.0 && theta[1] == 0.0))
     };
-    let mut step = step_at(
-        ctx,
-        train,
-        &entry,
-        &at,
-        theta,
-        bound,
-        scope,
-        &onset,
-        beside(theta, bound),
-    )?;
+    let step_of = |theta: Theta, bound: [bool; 3], scope: Scope<'_>| {
+        step_at(
+            ctx,
+            train,
+            &entry,
+            &at,
+            theta,
+            bound,
+            scope,
+            &onset,
+            beside(theta, bound),
+        )
+    };
+    let mut step = step_of(theta, bound, scope)?;
     // The training error the calibration parameters alone leave (what a friction's step must
     // improve on).
     let sse0 = || {
@@ -446,17 +449,7 @@ fn fit_from(
             if bound[0] && bound[1] {
                 return None;
             }
-            step = step_at(
-                ctx,
-                train,
-                &entry,
-                &at,
-                theta,
-                bound,
-                scope,
-                &onset,
-                beside(theta, bound),
-            )?;
+            step = step_of(theta, bound, scope)?;
             continue;
         }
         let sse = step.fit.0.sse;
@@ -479,30 +472,10 @@ fn fit_from(
             break;
         }
         theta = next;
-        step = step_at(
-            ctx,
-            train,
-            &entry,
-            &at,
-            theta,
-            bound,
-            scope,
-            &onset,
-            beside(theta, bound),
-        )?;
+        step = step_of(theta, bound, scope)?;
     }
     if let Some(done) = step.partial.take() {
-        step = step_at(
-            ctx,
-            train,
-            &entry,
-            &at,
-            theta,
-            bound,
-            Scope::Complete(&done),
-            &onset,
-            beside(theta, bound),
-        )?;
+        step = step_of(theta, bound, Scope::Complete(&done))?;
     }
     let Step {
         fit, x, sd, beside, ..
