@@ -199,7 +199,7 @@ pub(crate) fn map_refusal(robot: &RobotConfig, series: &[crate::series::Series])
         .filter(|(_, (_, r))| r[0] <= r[1])
         .find_map(|(i, (leg, r))| {
             let mm = leg.actuation.mm_per_step();
-            let map = pcr_kinematics::TendonMap::from_spec(&leg.tendon_map);
+            let map = pcr_kinematics::TendonMap::from_leg(leg);
             pcr_calibration::step1::displacement_coverage(&map, r[0] * mm, r[1] * mm)
                 .err()
                 .map(|e| format!("leg {}: {e}", i + 1))
@@ -425,6 +425,43 @@ mod tests {
         });
         let p = robot.fk(&kappa).unwrap();
         ([p.x, p.y, p.phi], kappa)
+    }
+
+    /// A map that turns back within the displacements the recordings command is refused, and
+    /// says which leg; the same map over displacements short of its turn is not.
+    #[test]
+    fn a_map_that_turns_back_within_the_commanded_displacements_is_refused() {
+        use crate::series::{Sample, Series};
+        let series = |q1: [f64; 2]| Series {
+            origin: "t".into(),
+            samples: q1
+                .iter()
+                .enumerate()
+                .map(|(k, &q)| Sample {
+                    t_s: 0.02 * k as f64,
+                    q: [q, 100.0, 100.0],
+                    pose: None,
+                    planned: None,
+                    settled: false,
+                    pose_id: None,
+                })
+                .collect(),
+            row_noise: None,
+            period_s: 0.02,
+            declared_delay_s: 0.0,
+            delay_declared: false,
+            delay_s: 0.0,
+        };
+        let nominal = RobotConfig::nominal();
+        assert_eq!(map_refusal(&nominal, &[series([-100.0, 500.0])]), None);
+        // Leg 1 a cubic whose slope k1 + 3 k3 dl^2 turns at dl = +-3 mm (196 steps).
+        let k1 = 1.0 / (7.0 * 125.0);
+        let mut bent = nominal.clone();
+        bent.legs[0].tendon_map =
+            TendonMapSpec::symmetric(TendonMapKind::Poly3, vec![0.0, k1, 0.0, -k1 / 27.0]);
+        let why = map_refusal(&bent, &[series([-100.0, 500.0])]).expect("refused");
+        assert!(why.starts_with("leg 1: the map turns back"), "{why}");
+        assert_eq!(map_refusal(&bent, &[series([-100.0, 150.0])]), None);
     }
 
     /// Every column is what the fits assume it is: the change of the pose when the parameter is
