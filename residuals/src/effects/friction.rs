@@ -160,11 +160,11 @@ struct Step {
 /// went below zero, and the supports, fitted alone from there, took the joints' couple and the
 /// play (0.195 N for 0.12; no play was named); beside the plays' columns it was 1.2 N mm and
 /// 0.049 N, and the analysis went on to name both with their values
-/// (`finds_friction_beside_backlash_and_tells_them_apart`). On a play alone the supports' first step beside it is
-/// nothing (1e-6 N), and the fit stops there, without a pass with the derivatives. The steps
-/// after the first keep them while the joints' limit is held at zero (the supports alone, the
-/// friction most like a play), and have none where the joints rub (beside every step,
-/// backlash + friction 3x took 15 % more time for the same result).
+/// (`finds_friction_beside_backlash_and_tells_them_apart`). On a play alone the supports'
+/// first step beside it is nothing (1e-6 N), and the fit stops there, without a pass with the
+/// derivatives. The steps after the first keep them while the joints' limit is held at zero
+/// (the supports alone, the friction most like a play), and have none where the joints rub
+/// (beside every step, backlash + friction 3x took 15 % more time for the same result).
 type Beside = Vec<[[f64; 3]; BESIDE]>;
 
 /// Columns beside the friction's ([`Beside`]): a play on each motor. (A delay's column beside
