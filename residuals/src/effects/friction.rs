@@ -19,7 +19,7 @@
 //! friction do not see, so that the first step's estimate is far from the friction's own (the
 //! joints' couple at about half its value); the re-linearised steps reach it.
 
-use super::joint_fit::{fit_joint, nuisance_change};
+use super::joint_fit::{fit_joint, fit_joint_beside, nuisance_change};
 use super::{lerp, Effect, Parameter};
 use crate::context::Context;
 use crate::context::Tangents;
@@ -334,28 +334,17 @@ fn step_at(
     };
     let nui = ctx.nuisance().nui.clone();
     let moved = offset.iter().any(|o| *o != [0.0; 3]);
-    let mut fit = fit_joint(ctx, &nui, train, n_e, &effect, moved.then_some(&offset[..]))?;
-    if let Some(b) = beside {
-        // The friction's change and the calibration's, the plays' left out: what the supports
-        // explain beyond a play, and its training error.
-        let plays = |x: &[f64]| -> [f64; BESIDE] { std::array::from_fn(|m| x[n_free + m]) };
-        let take_out = |delta: &mut [[f64; 3]], p: [f64; BESIDE]| {
-            for (d, c) in delta.iter_mut().zip(b) {
-                for (k, dk) in d.iter_mut().enumerate() {
-                    *dk -= (0..BESIDE).map(|m| p[m] * c[m][k]).sum::<f64>();
-                }
-            }
-        };
-        take_out(&mut fit.1, plays(&fit.0.x));
-        if !moved {
-            fit.2 = crate::linear::solve(ctx, train, n_e, &effect).map(|f| {
-                let mut d = crate::linear::deltas(ctx, n_e, &f.x, &effect, None);
-                take_out(&mut d, plays(&f.x));
-                d
-            });
-        }
-        fit.0.sse = ctx.sse(train, Some(&fit.1));
-    }
+    // The plays' part left out of the friction's change: what the supports explain beyond a
+    // play.
+    let fit = fit_joint_beside(
+        ctx,
+        &nui,
+        train,
+        n_e,
+        n_e - n_free,
+        &effect,
+        moved.then_some(&offset[..]),
+    )?;
     let mut x = [0.0; 3];
     let mut sd = [None; 3];
     for (a, &j) in free.iter().enumerate() {

@@ -20,6 +20,28 @@ pub(crate) fn fit_joint(
     effect: &(dyn Fn(usize, &mut Columns) + Sync),
     offset: Option<&[[f64; 3]]>,
 ) -> Option<JointFit> {
+    fit_joint_beside(ctx, nui, train, n_e, 0, effect, offset)
+}
+
+/// [`fit_joint`] whose last `beside` of the `n_e` effect columns are fitted beside the effect
+/// and left out of its change (every row's, and the effect's alone) and of the training error
+/// reported (the error with that change): what another effect would take, so that the effect
+/// is fitted beyond it (a play's columns beside a friction's first step).
+pub(crate) fn fit_joint_beside(
+    ctx: &Context,
+    nui: &Nuisance,
+    train: &[usize],
+    n_e: usize,
+    beside: usize,
+    effect: &(dyn Fn(usize, &mut Columns) + Sync),
+    offset: Option<&[[f64; 3]]>,
+) -> Option<JointFit> {
+    // The solution with the columns beside taken out of it.
+    let kept = |x: &[f64]| -> Vec<f64> {
+        let mut x = x.to_vec();
+        x[n_e - beside..n_e].fill(0.0);
+        x
+    };
     let n_g = nui.n;
     let n = n_e + n_g;
     let mut prior = vec![0.0; n_e];
@@ -41,7 +63,7 @@ pub(crate) fn fit_joint(
     let alone = match offset {
         Some(o) => Some(o.to_vec()),
         None if n_e > 0 => linear::solve(ctx, train, n_e, effect)
-            .map(|f| linear::deltas(ctx, n_e, &f.x, effect, None)),
+            .map(|f| linear::deltas(ctx, n_e, &kept(&f.x), effect, None)),
         None => None,
     };
     let table = (n_g > 0).then(|| ctx.nuisance());
@@ -51,13 +73,17 @@ pub(crate) fn fit_joint(
         Some(t) => linear::solve_joint(ctx, train, n_e, effect, t, Some(&prior), offset),
         None => linear::solve_with_prior(ctx, train, n, effect, Some(&prior), offset),
     }?;
-    let mut delta = linear::deltas(ctx, n_e, &fit.x, effect, table.as_deref());
+    let mut fit = fit;
+    let mut delta = linear::deltas(ctx, n_e, &kept(&fit.x), effect, table.as_deref());
     if let Some(o) = offset {
         for (d, oo) in delta.iter_mut().zip(o) {
             for k in 0..3 {
                 d[k] += oo[k];
             }
         }
+    }
+    if beside > 0 {
+        fit.sse = ctx.sse(train, Some(&delta));
     }
     Some((fit, delta, alone))
 }
