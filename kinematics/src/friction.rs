@@ -817,7 +817,10 @@ fn settle(
 }
 
 /// The anchors `a` after the elements moved to `x`: those that slipped follow, each to its
-/// pre-sliding travel behind its coordinate.
+/// pre-sliding travel behind its coordinate. A class of elements without friction keeps no
+/// history: its anchors are its coordinates. (Left where the path started, they told two
+/// pieces of one pass apart for ever ([`FrictionState::difference`]), and a pass of the
+/// supports alone answered five of its six pieces twice.)
 fn slipped(f: &Friction, x: &VE, a: &VE) -> VE {
     let mut next = *a;
     if f.joint_torque > 0.0 {
@@ -828,8 +831,12 @@ fn slipped(f: &Friction, x: &VE, a: &VE) -> VE {
                 next[e] = x[e] - s.signum() * lim;
             }
         }
+    } else {
+        next.rows_mut(0, 6).copy_from(&x.rows(0, 6));
     }
-    if f.support_force > 0.0 {
+    if f.support_force <= 0.0 {
+        next.rows_mut(6, 12).copy_from(&x.rows(6, 12));
+    } else {
         let lim = f.support_presliding;
         for p in 0..6 {
             let (ix, iy) = (6 + 2 * p, 7 + 2 * p);
