@@ -195,12 +195,7 @@ EFFECTS = {
 # text) and why (docs/residuals.md, "Validation"). --check reports such failures as expected
 # instead of failing on them, and says so when the case passes; every other rule of the case, and
 # every other case, must hold.
-EXPECTED_FAILURES: dict = {
-    "backlash+friction_supports-3x": (
-        "cpu on one core",
-        "the supports alone beside a play: the friction, taken in first, takes part of the play "
-        "and the play enters through the full model (10-10.5 s)"),
-}
+EXPECTED_FAILURES: dict = {}
 
 
 def unexpected_failures(r):

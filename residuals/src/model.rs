@@ -282,7 +282,11 @@ fn along_path_in<S: PassState, T: Send>(
     // them from half that length on ([`PASS_CHUNK`]).
     let rows = pieces.rows.max(1);
     let count = n.div_ceil(rows).max(1);
-    let count = if 2 * n >= rows { count + count % 2 } else { count };
+    let count = if 2 * n >= rows {
+        count + count % 2
+    } else {
+        count
+    };
     let size = n.div_ceil(count).max(1);
     let starts: Vec<usize> = (0..n).step_by(size).collect();
     let answered: Vec<Piece<S, T>> = starts
@@ -1938,11 +1942,18 @@ mod tests {
             let (one, _) = pass(usize::MAX);
             let (pieces, again) = pass(300);
             assert_eq!(again, 0, "{one_class:?}: every rebuilt history agrees");
-            let moved = one.iter().flatten().filter(|d| d[0].hypot(d[1]) > 1e-4).count();
+            let moved = one
+                .iter()
+                .flatten()
+                .filter(|d| d[0].hypot(d[1]) > 1e-4)
+                .count();
             assert!(moved > 100, "{one_class:?}: {moved} rows deflected");
             for (a, b) in one.iter().zip(&pieces) {
                 let (a, b) = (a.unwrap(), b.unwrap());
-                assert!((0..3).all(|c| (a[c] - b[c]).abs() < 1e-6), "{a:?} against {b:?}");
+                assert!(
+                    (0..3).all(|c| (a[c] - b[c]).abs() < 1e-6),
+                    "{a:?} against {b:?}"
+                );
             }
         }
     }

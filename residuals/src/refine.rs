@@ -29,6 +29,30 @@ fn slots(e: &Effects) -> Vec<Parameter> {
         .collect()
 }
 
+/// Which of [`slots`] mean nothing where `e` stands ([`crate::effects::Effect::holds`]): a
+/// refinement holds them there and states no error for them.
+fn held(e: &Effects) -> Vec<bool> {
+    effects::in_file_order()
+        .iter()
+        .flat_map(|x| (0..x.parameters(e).len()).map(move |j| x.holds(e, j)))
+        .collect()
+}
+
+/// The errors of the parameters a refinement moved (`moved`, in [`slots`]' order without the
+/// ones it held) in [`slots`]' order: zero for a held one.
+fn with_held(held: &[bool], moved: &[f64]) -> Vec<f64> {
+    let mut moved = moved.iter();
+    held.iter()
+        .map(|&h| {
+            if h {
+                0.0
+            } else {
+                *moved.next().unwrap_or(&0.0)
+            }
+        })
+        .collect()
+}
+
 /// The continuous parameters of every effect `e` declares ([`slots`]' order): the iterates the
 /// joint estimation from the drawing extrapolates, and the refinement's start.
 pub(crate) fn values(e: &Effects) -> Vec<f64> {
@@ -882,7 +906,13 @@ pub(crate) fn refine_with_errors(
     errors: Errors,
 ) -> (RobotConfig, Option<Vec<f64>>) {
     let at_optimum = errors == Errors::AtOptimum;
-    let slots = slots(&config.effects);
+    // The parameters that mean nothing where the effects stand are held there.
+    let held = held(&config.effects);
+    let slots: Vec<Parameter> = slots(&config.effects)
+        .into_iter()
+        .zip(&held)
+        .filter_map(|(s, &h)| (!h).then_some(s))
+        .collect();
     if slots.is_empty() {
         return (config.clone(), None);
     }
@@ -1035,6 +1065,7 @@ pub(crate) fn refine_with_errors(
                 Errors::No => None,
                 Errors::Approximate | Errors::AtOptimum => p.errors(&fit, blocks),
             };
+            let errors = errors.map(|e| with_held(&held, &e));
             (out, errors)
         }
         Err(_) => (config.clone(), None),
@@ -1123,6 +1154,41 @@ mod tests {
             }),
             ..Effects::default()
         }
+    }
+
+    /// The joints' pre-sliding travel is held while the joints do not rub, and only then: the
+    /// other parameters are moved, and a held one's error is stated as none (zero) in
+    /// [`values`]' order.
+    #[test]
+    fn the_joints_presliding_travel_is_held_while_they_do_not_rub() {
+        let with = |joint_torque_n_mm: f64| {
+            let mut e = latency_backlash_drift();
+            e.friction = Some(pcr_robot::effects::Friction {
+                joint_torque_n_mm,
+                support_force_n: 0.12,
+                joint_presliding_rad: 0.001,
+                support_presliding_mm: 0.005,
+                ei_n_mm2: 65000.0,
+            });
+            e
+        };
+        let n = slots(&with(0.0)).len();
+        // Latency 1, plays 3, drift 3, friction 3 (the travel last).
+        assert_eq!(n, 10);
+        for torque in [0.0, 1e-25, 6e-4] {
+            let h = held(&with(torque));
+            assert_eq!(h.iter().filter(|&&x| x).count(), 1, "{torque}");
+            assert!(h[n - 1], "{torque}: the travel held");
+        }
+        for torque in [0.2, 2.0] {
+            assert!(held(&with(torque)).iter().all(|&x| !x), "{torque}");
+        }
+        let mut h = vec![false; n];
+        h[n - 1] = true;
+        let moved: Vec<f64> = (1..n).map(|k| k as f64).collect();
+        let all = with_held(&h, &moved);
+        assert_eq!(all[..n - 1], moved[..]);
+        assert_eq!(all[n - 1], 0.0);
     }
 
     /// A linearisation of the friction by hand: slot 0 a friction value along the path (its

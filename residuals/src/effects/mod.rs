@@ -180,6 +180,13 @@ pub trait Effect: Extension {
         Vec::new()
     }
 
+    /// Whether its parameter `index` ([`Effect::parameters`]) means nothing where `effects`
+    /// stand, so that a refinement holds it where it is and states no error for it (the
+    /// joints' pre-sliding travel while the joints do not rub). None by default.
+    fn holds(&self, _effects: &Effects, _index: usize) -> bool {
+        false
+    }
+
     /// Its part of the robot file `new` moved to a fraction `s` of the way from `old` (its
     /// continuous values interpolated with [`lerp`], absent from `old` counting as zero): the
     /// damping of a linearised step. Nothing by default.
