@@ -241,6 +241,14 @@ fn augmented_residuals(f: &DVector<f64>, n: usize) -> DVector<f64> {
 /// The exact trust-region step in the scaled variables from the SVD of the augmented Jacobian
 /// (Moré 1978): the Gauss-Newton step if it fits, else the Levenberg-Marquardt step of length
 /// `delta`. Returns the step and the LM parameter.
+///
+/// Where the Jacobian is rank-deficient (a parameter at a bound whose gradient points out of
+/// the box: its scaled column is zero), the Gauss-Newton step is the least-norm one, the
+/// singular values below the rank's tolerance left out. When it fits, no Levenberg-Marquardt
+/// step reaches the radius: Moré's iteration then drove the parameter below zero (-5e-4),
+/// and the step stretched to the radius raised the model's cost. A refinement of the supports'
+/// friction with the joints' couple held at zero took 15 evaluations for 4, every other step
+/// refused (SciPy's `solve_lsq_trust_region` iterates the same way).
 fn trust_region_step(
     rows: usize,
     uf: &DVector<f64>,
@@ -253,12 +261,13 @@ fn trust_region_step(
     let suf = s.component_mul(uf);
     let smax = s.max();
     let smin = s.min();
-    let full_rank = rows >= n && smin > f64::EPSILON * rows as f64 * smax;
-    if full_rank {
-        let p = -vt.tr_mul(&uf.component_div(s));
-        if p.norm() <= delta {
-            return (p, 0.0);
-        }
+    let rank_tol = f64::EPSILON * rows as f64 * smax;
+    let full_rank = rows >= n && smin > rank_tol;
+    // The (least-norm) Gauss-Newton step, when it fits.
+    let gauss_newton = DVector::from_fn(n, |k, _| if s[k] > rank_tol { uf[k] / s[k] } else { 0.0 });
+    let p = -vt.tr_mul(&gauss_newton);
+    if p.norm() <= delta {
+        return (p, 0.0);
     }
     let phi = |a: f64| -> (f64, f64) {
         let mut pn2 = 0.0;
@@ -515,6 +524,38 @@ mod tests {
         let a = DMatrix::from_fn(m, n, |_, k| next() * 10f64.powi(k as i32 % 5 - 2));
         let b = DVector::from_fn(m, |_, _| next());
         (a, b)
+    }
+
+    /// A Jacobian with a zero column (a parameter at its bound whose scaled column vanishes):
+    /// where the least-norm Gauss-Newton step fits in the radius it is the step, with no
+    /// Levenberg-Marquardt parameter, and lowers the model; where it does not, the step has
+    /// the radius's length, a parameter not below zero, and lowers the model too.
+    #[test]
+    fn a_rank_deficient_jacobian_takes_its_least_norm_gauss_newton_step() {
+        let (m, n) = (200, 5);
+        let (mut a, f) = tall(m, n);
+        a.column_mut(2).fill(0.0);
+        let svd = a.clone().svd(true, true);
+        let (uf, s, vt) = (
+            svd.u.unwrap().tr_mul(&f),
+            svd.singular_values,
+            svd.v_t.unwrap(),
+        );
+        let g = a.tr_mul(&f);
+        let zero = DVector::zeros(n);
+        let least = a.clone().pseudo_inverse(1e-12).unwrap() * &f;
+        for delta in [10.0 * least.norm(), 0.5 * least.norm()] {
+            let (p, alpha) = trust_region_step(m, &uf, &s, &vt, delta, 0.0);
+            assert!(alpha >= 0.0, "{alpha}");
+            assert!(p[2].abs() < 1e-12 * p.norm(), "{p}");
+            assert!(quadratic(&a, &g, &p, &zero) < 0.0);
+            if delta > least.norm() {
+                assert_eq!(alpha, 0.0);
+                assert!((&p + &least).norm() <= 1e-10 * least.norm(), "{p} {least}");
+            } else {
+                assert!((p.norm() - delta).abs() <= 1e-12 * delta);
+            }
+        }
     }
 
     #[test]
