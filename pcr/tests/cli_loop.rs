@@ -112,6 +112,9 @@ fn the_loop_extends_the_model_and_the_rerun_is_better() {
         assert!(e["evidence"]["p_value"].as_f64().unwrap() < 0.01);
     }
     assert!(r["candidates"].as_array().unwrap().len() >= 9);
+    // The analysis makes the calibration again from the drawing with its effects in the model,
+    // from the loop's calibration poses, as `pcr residuals` does.
+    assert_eq!(r["options"]["from_drawing"], serde_json::Value::Bool(true));
     for k in [
         "position_mean_mm",
         "position_max_mm",

@@ -25,9 +25,17 @@ pub struct Options {
     pub progress: crate::progress::ProgressSink,
     /// The static poses of the first calibration, to make it again from the drawing with the
     /// effects in the model ([`crate::recalibration`]); `None`: the calibration parameters are
-    /// refined linearised only.
-    #[serde(skip)]
+    /// refined linearised only. The JSON says which (`from_drawing`).
+    #[serde(rename = "from_drawing", serialize_with = "is_given")]
     pub recalibration: Option<std::sync::Arc<Recalibration>>,
+}
+
+/// Whether the static poses for the calibration from the drawing were given.
+fn is_given<S: serde::Serializer>(
+    r: &Option<std::sync::Arc<Recalibration>>,
+    s: S,
+) -> Result<S::Ok, S::Error> {
+    s.serialize_bool(r.is_some())
 }
 
 impl Default for Options {
