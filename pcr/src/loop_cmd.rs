@@ -176,8 +176,9 @@ pub fn run(a: Args) -> Result<()> {
         a.seed,
         1.0 / 3.0,
     )?;
-    let cal =
-        calibrate::calibrate_data(&start, &sd, &CalOptions::default()).context("calibration")?;
+    // The calibration's settings, which the residual analysis makes it again with.
+    let cal_settings = CalOptions::default();
+    let cal = calibrate::calibrate_data(&start, &sd, &cal_settings).context("calibration")?;
     let created = pcr_offline::clock::utc_now();
     let calibrated_path = file("calibrated.toml");
     std::fs::write(&calibrated_path, calibrate::robot_file(&cal, &created))
@@ -220,7 +221,7 @@ pub fn run(a: Args) -> Result<()> {
         recalibration: Some(std::sync::Arc::new(pcr_residuals::options::Recalibration {
             data: sd,
             series: 0,
-            options: CalOptions::default(),
+            options: cal_settings,
         })),
         ..Options::default()
     };
