@@ -120,8 +120,15 @@ pub(crate) fn accept<'a>(
     let (cfg, _, sse) = cur?;
     // Every effect's parameters together on the full model.
     let refined = crate::refine::search(&cfg, &ctx.model, series, blocks, w_phi);
+    // The model returned is predicted with its friction's derivatives: the calibration from
+    // the drawing that follows reads that pass, and the refinement after it linearises its
+    // friction with the same pass (`refine::search_linearised_at`).
+    let linearised = |mut m: ExtendedModel| {
+        m.friction_derivatives = true;
+        m
+    };
     if refined != cfg {
-        if let Ok(model) = ExtendedModel::like(&refined, &ctx.model) {
+        if let Ok(model) = ExtendedModel::like(&refined, &ctx.model).map(linearised) {
             let least = ctx.rows.len().saturating_sub(5);
             let rctx = Context::at_least(series, model, blocks, w_phi, least);
             if rctx.rows.len() + 5 >= ctx.rows.len()
@@ -132,7 +139,7 @@ pub(crate) fn accept<'a>(
         }
     }
     // The held-out rows too, for the scoring that follows.
-    let model = ExtendedModel::like(&cfg, &ctx.model).ok()?;
+    let model = ExtendedModel::like(&cfg, &ctx.model).ok().map(linearised)?;
     Some((cfg, Context::new(series, model, blocks, w_phi)))
 }
 

@@ -1143,6 +1143,16 @@ const FROM_DRAWING_ROUNDS: usize = 3;
 /// (0.1 % before it: a third alternation of 1-1.5 s under loads for a gain of 0.1 %).
 const FROM_DRAWING_GAIN: f64 = 0.99;
 
+/// Largest move of any effect's parameter in one alternation, in its standard errors (the
+/// refinement's, on its subsample), after which no further alternation is made: the next
+/// calibration from the drawing starts from effects that moved by so little that it comes out
+/// as this one did. On the sweep's recordings every alternation that moved no parameter by more
+/// than 1.3 errors was followed by one that took nothing off the held-out error (-0.03 % to
+/// +0.003 %: friction, supports alone and backlash, alone and in pairs; 0.6 s each where the
+/// friction is in the model), and those after moves of 4.5 to 7.5 errors took off 0.2 % at
+/// most but once 1.1 % (a load of 1.2 N with backlash, after 6.8 errors).
+const SETTLED_ERRORS: f64 = 3.0;
+
 /// Smallest move of a parameter, relative to its value, that the extrapolation after the
 /// alternations ([`aitken`]) is made for: a smaller one is far inside the parameter's error
 /// (joint springs at a tenth of the sweep's test strength: k_M 29.337 -> 29.374 N mm/rad
@@ -1218,8 +1228,9 @@ fn from_drawing<'a>(
                      ctx: &Context<'a>|
      -> Option<(RobotConfig, Context<'a>, Option<Vec<f64>>)> {
         let cal = crate::recalibration::recalibrated(config, ctx, set.drawing, recal)?;
-        let (refined, errors) = crate::refine::search_with_errors(
+        let (refined, errors) = crate::refine::search_linearised_at(
             &cal,
+            config,
             &ctx.model,
             set.series,
             set.blocks,
@@ -1270,8 +1281,13 @@ fn from_drawing<'a>(
             ?errors,
             "calibration from the drawing"
         );
+        let settled = settled(
+            iterates.last().map(Vec::as_slice),
+            &values,
+            errors.as_deref(),
+        );
         iterates.push(values);
-        let gain = ms < FROM_DRAWING_GAIN * best_ms;
+        let gain = ms < FROM_DRAWING_GAIN * best_ms && !settled;
         // A capture frame that the alternation takes further beyond a registration error,
         // where the static poses do not confirm it, is refused at the end whatever the
         // alternations after this one make of it (cross-coupling at 7 %: -3.4, -4.7 deg); they
@@ -1401,6 +1417,24 @@ fn arrived(target: &[f64], last: &[f64], errors: Option<&[f64]>) -> bool {
                 .and_then(|e| e.get(k))
                 .is_some_and(|s| d <= EXTRAPOLATION_ERRORS * s)
     })
+}
+
+/// Whether an alternation that took the effects' parameters from `before` to `after` (both
+/// [`values`]' order) moved none by more than [`SETTLED_ERRORS`] of its standard error
+/// `errors`; not without the errors, nor for iterates of different effects.
+///
+/// [`values`]: crate::refine::values
+fn settled(before: Option<&[f64]>, after: &[f64], errors: Option<&[f64]>) -> bool {
+    let (Some(before), Some(errors)) = (before, errors) else {
+        return false;
+    };
+    before.len() == after.len()
+        && errors.len() == after.len()
+        && after
+            .iter()
+            .zip(before)
+            .zip(errors)
+            .all(|((a, b), e)| a == b || (a - b).abs() <= SETTLED_ERRORS * e)
 }
 
 /// The share of the held-out mean square the next alternation of the calibration from the
@@ -1653,6 +1687,25 @@ mod tests {
         // Within 1 % of every value: arrived, with or without errors.
         assert!(arrived(&[300.5, 2.0], &[300.1, 2.01], None));
         assert!(arrived(&[300.5, 2.0], &[300.1, 2.01], Some(&[0.1, 0.001])));
+    }
+
+    /// An alternation that moved no parameter by more than three of its errors is the last;
+    /// one error where the parameter's own is zero (held) is a move.
+    #[test]
+    fn an_alternation_that_moved_nothing_by_three_errors_is_the_last() {
+        // Supports alone with backlash at 1x: the force moved by 1.0 error, the joints' couple
+        // held at zero, their pre-sliding travel held (no error).
+        let before = [0.0, 9.621, 1.0];
+        let after = [1e-26, 9.6877, 1.0];
+        let errors = [0.106, 0.0555, 0.0];
+        assert!(settled(Some(&before), &after, Some(&errors)));
+        // Backlash coming in beside friction: the plays moved by 35 errors.
+        assert!(!settled(Some(&[2.0]), &[2.9], Some(&[0.0245])));
+        // A held parameter that moved, no errors, or different effects: not settled.
+        assert!(!settled(Some(&[1.0]), &[1.1], Some(&[0.0])));
+        assert!(!settled(Some(&[1.0]), &[1.0], None));
+        assert!(!settled(Some(&[1.0]), &[1.0, 2.0], Some(&[0.1, 0.1])));
+        assert!(!settled(None, &[1.0], Some(&[0.1])));
     }
 
     /// The next alternation's expected gain continues the last two as a geometric sequence:

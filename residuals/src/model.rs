@@ -1033,6 +1033,19 @@ impl ExtendedModel {
         rows.iter().map(|r| r.map(|r| (r.d, r.joints))).collect()
     }
 
+    /// [`ExtendedModel::friction_path_with_joints`] from the pass with the derivatives by the
+    /// friction's values ([`ExtendedModel::friction_path_tangent`]), made and kept where none is:
+    /// the pass a refinement of this model's effects then linearises its friction with.
+    pub fn friction_path_with_joints_linearised(
+        &self,
+        rigid: &RigidPath,
+        kappa: &[[f64; 3]],
+        f: &Friction,
+    ) -> Vec<Option<DeflectionAndJoints>> {
+        let rows = self.kept_pass(rigid, kappa, f, true);
+        rows.iter().map(|r| r.map(|r| (r.d, r.joints))).collect()
+    }
+
     /// The friction's pass along `rigid` (with the derivatives when `tangent`), as one made
     /// before for the same legs, path and friction left it ([`KEPT`]), or made now and kept.
     fn kept_pass(

@@ -145,8 +145,13 @@ const FIRST_RADIUS: f64 = 100.0;
 const SECANT_STEPS: usize = 1;
 
 /// Most re-linearisations of the friction in a refinement that reports its errors
-/// ([`FrozenFriction`]; a search's refinement makes one).
-const FRICTION_RELINEARISATIONS: usize = 2;
+/// ([`FrozenFriction`]), as in a search's refinement: one. A second (made where the first moved
+/// a play by more than a thousandth of it) moved the plays of backlash + friction at 1x by a
+/// tenth of their stated errors for 0.6 s of the final estimate's 22k rows; beside the
+/// supports' friction at 3x the plays creep with the supports' force along their valley,
+/// 9.013 -> 9.040 -> ... steps, each re-linearisation a little less than the one before, and
+/// a second one does not end that either.
+const FRICTION_RELINEARISATIONS: usize = 1;
 
 /// Most evaluations of the model in a refinement of the search (7-13 reach the tolerance).
 const MAX_EVALUATIONS: usize = 200;
@@ -905,6 +910,90 @@ pub(crate) fn refine_with_errors(
     max_evaluations: usize,
     errors: Errors,
 ) -> (RobotConfig, Option<Vec<f64>>) {
+    refine_linearised_at(
+        config,
+        like,
+        series,
+        blocks,
+        w_phi,
+        max_rows,
+        calibration,
+        max_evaluations,
+        errors,
+        None,
+    )
+}
+
+/// [`search_with_errors`] with the friction linearised on the geometry of `at`, a robot file
+/// whose effects are `config`'s ([`refine_linearised_at`]).
+pub(crate) fn search_linearised_at(
+    config: &RobotConfig,
+    at: &RobotConfig,
+    like: &ExtendedModel,
+    series: &[Series],
+    blocks: &Blocks,
+    w_phi: f64,
+    errors: Errors,
+) -> (RobotConfig, Option<Vec<f64>>) {
+    refine_linearised_at(
+        config,
+        like,
+        series,
+        blocks,
+        w_phi,
+        SEARCH_ROWS,
+        true,
+        MAX_EVALUATIONS,
+        errors,
+        Some(at),
+    )
+}
+
+/// Where a refinement of `config`'s parameters `slots` linearises its friction first, and
+/// whether that linearisation is stale ([`refine_linearised_at`]): at `at` where it is another
+/// robot file with the same values of those parameters (to the bit), else at `config`.
+fn linearisation_start<'c>(
+    config: &'c RobotConfig,
+    at: Option<&'c RobotConfig>,
+    slots: &[Parameter],
+) -> (&'c RobotConfig, bool) {
+    let same_values = |a: &Effects, b: &Effects| {
+        slots
+            .iter()
+            .all(|s| (s.get)(a, s.index).to_bits() == (s.get)(b, s.index).to_bits())
+    };
+    match at {
+        Some(a) if a != config && same_values(&a.effects, &config.effects) => (a, true),
+        _ => (config, false),
+    }
+}
+
+/// [`refine_with_errors`] with the friction linearised first ([`FrozenFriction`]) on the
+/// geometry of `at` where given and its effects' parameters are `config`'s: the robot file a
+/// calibration from the drawing started from, whose pass along every row that calibration made
+/// with the derivatives ([`crate::recalibration`]). That linearisation only starts the
+/// refinement: its first solve is linearised again where it arrives, on its own geometry, and
+/// solved from there, whether or not the plays moved. The calibration moves the geometry by
+/// tenths of a millimetre and of a degree, which moves the friction's deflection by a small
+/// share along most of a path, but by up to half of it where a history of stick and slip
+/// turns out otherwise (a swinging path at three times the prototype's friction, psi 0.3 deg
+/// and l_C and r_p 0.2 mm further: under 1 % of the largest deflection on most rows, up to
+/// 0.75 of 1.2 mm on a stretch of 70 rows of 300). One pass with the derivatives replaces a pass without them
+/// and one with them: 0.15-0.2 s of each alternation of the calibration from the drawing
+/// where a play moves.
+#[allow(clippy::too_many_arguments)]
+fn refine_linearised_at(
+    config: &RobotConfig,
+    like: &ExtendedModel,
+    series: &[Series],
+    blocks: &Blocks,
+    w_phi: f64,
+    max_rows: usize,
+    calibration: bool,
+    max_evaluations: usize,
+    errors: Errors,
+    at: Option<&RobotConfig>,
+) -> (RobotConfig, Option<Vec<f64>>) {
     let at_optimum = errors == Errors::AtOptimum;
     // The parameters that mean nothing where the effects stand are held there.
     let held = held(&config.effects);
@@ -967,7 +1056,9 @@ pub(crate) fn refine_with_errors(
         lo.resize(x0.len(), f64::NEG_INFINITY);
         hi.resize(x0.len(), f64::INFINITY);
     }
-    let friction = FrozenFriction::new(config, like, &slots, series, &rows);
+    let (at, mut stale) = linearisation_start(config, at, &slots);
+    let friction = FrozenFriction::new(at, like, &slots, series, &rows);
+    stale &= friction.is_some();
     let mut p = Refit {
         base: config,
         like,
@@ -1006,19 +1097,13 @@ pub(crate) fn refine_with_errors(
     // curvatures left it (a play of 5.4 steps refined to 3 moves every reversal by more than a
     // step): linearised again where the refinement arrived and refined from there, while they
     // move.
-    // A search's refinement (no errors) is refined again by the one that reports the errors,
-    // on every row: it re-linearises once.
-    let relinearisations = if at_optimum {
-        FRICTION_RELINEARISATIONS
-    } else {
-        1
-    };
-    for _ in 0..relinearisations {
+    for _ in 0..FRICTION_RELINEARISATIONS {
         let Ok(f) = &fit else { break };
         let moved = p.friction.is_some()
-            && p.slots.iter().enumerate().any(|(k, s)| {
-                s.moves_curvatures && (f.x[k] - x0[k]).abs() > 1e-3 * x0[k].abs().max(1.0)
-            });
+            && (std::mem::take(&mut stale)
+                || p.slots.iter().enumerate().any(|(k, s)| {
+                    s.moves_curvatures && (f.x[k] - x0[k]).abs() > 1e-3 * x0[k].abs().max(1.0)
+                }));
         if !moved {
             break;
         }
@@ -1189,6 +1274,32 @@ mod tests {
         let all = with_held(&h, &moved);
         assert_eq!(all[..n - 1], moved[..]);
         assert_eq!(all[n - 1], 0.0);
+    }
+
+    /// A refinement started on another geometry's linearisation of the friction takes it only
+    /// where that robot file differs from its own and holds the same values of the refined
+    /// parameters (to the bit), and then calls it stale (linearised again where its first solve
+    /// arrives).
+    #[test]
+    fn a_linearisation_on_another_geometry_serves_only_the_same_values_and_is_stale() {
+        let mut config = RobotConfig::nominal();
+        config.effects = latency_backlash_drift();
+        let slots = slots(&config.effects);
+        let mut other = config.clone();
+        other.legs[0].psi_deg += 0.3;
+        let (at, stale) = linearisation_start(&config, Some(&other), &slots);
+        assert!(std::ptr::eq(at, &other) && stale);
+        // The same robot file, or none: its own, not stale.
+        let same = config.clone();
+        let (at, stale) = linearisation_start(&config, Some(&same), &slots);
+        assert!(std::ptr::eq(at, &config) && !stale);
+        let (at, stale) = linearisation_start(&config, None, &slots);
+        assert!(std::ptr::eq(at, &config) && !stale);
+        // Another value of a refined parameter (a play): its own.
+        let mut moved = other.clone();
+        (slots[1].set)(&mut moved.effects, slots[1].index, 9.5);
+        let (at, stale) = linearisation_start(&config, Some(&moved), &slots);
+        assert!(std::ptr::eq(at, &config) && !stale);
     }
 
     /// A linearisation of the friction by hand: slot 0 a friction value along the path (its
