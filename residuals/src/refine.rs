@@ -968,19 +968,21 @@ fn linearisation_start<'c>(
     }
 }
 
-/// [`refine_with_errors`] with the friction linearised first ([`FrozenFriction`]) on the
-/// geometry of `at` where given and its effects' parameters are `config`'s: the robot file a
-/// calibration from the drawing started from, whose pass along every row that calibration made
-/// with the derivatives ([`crate::recalibration`]). That linearisation only starts the
-/// refinement: its first solve is linearised again where it arrives, on its own geometry, and
-/// solved from there, whether or not the plays moved. The calibration moves the geometry by
-/// tenths of a millimetre and of a degree, which moves the friction's deflection by a small
-/// share along most of a path, but by up to half of it where a history of stick and slip
-/// turns out otherwise (a swinging path at three times the prototype's friction, psi 0.3 deg
-/// and l_C and r_p 0.2 mm further: under 1 % of the largest deflection on most rows, up to
-/// 0.75 of 1.2 mm on a stretch of 70 rows of 300). One pass with the derivatives replaces a pass without them
-/// and one with them: 0.15-0.2 s of each alternation of the calibration from the drawing
-/// where a play moves.
+/// [`refine_with_errors`] with the friction linearised ([`FrozenFriction`]) on the geometry of
+/// `at` where given, another robot file with the same values of the refined parameters: the
+/// one a calibration from the drawing started from, whose pass along every row that calibration
+/// made with the derivatives ([`crate::recalibration`]). One pass with the derivatives then
+/// replaces a pass without them and one with them, 0.15-0.2 s of each alternation. The
+/// refinement holds the friction's deflection on the geometry as it does while its own
+/// calibration parameters move (and where the plays move it linearises again, on its own
+/// geometry). The calibration moves the geometry by tenths of a millimetre and of a degree,
+/// which moves the deflection by a small share along most of a path but not everywhere: on a
+/// swinging path at three times the prototype's friction, with psi 0.3 deg and l_C and r_p
+/// 0.2 mm further, under 1 % of the largest deflection on most rows and up to 0.75 of 1.2 mm on
+/// a stretch of 70 rows of 300, where the history of stick and slip turned out otherwise.
+/// Linearising again on its own geometry after every first solve was tried: on backlash +
+/// friction at 3x the joints' pre-sliding travel, which the data tell poorly, then went to its
+/// bound in the friction's alternation, and the plays came out 3.6 errors off.
 #[allow(clippy::too_many_arguments)]
 fn refine_linearised_at(
     config: &RobotConfig,
@@ -1056,9 +1058,11 @@ fn refine_linearised_at(
         lo.resize(x0.len(), f64::NEG_INFINITY);
         hi.resize(x0.len(), f64::INFINITY);
     }
-    let (at, mut stale) = linearisation_start(config, at, &slots);
+    let (at, stale) = linearisation_start(config, at, &slots);
     let friction = FrozenFriction::new(at, like, &slots, series, &rows);
-    stale &= friction.is_some();
+    if stale && friction.is_some() {
+        tracing::debug!("friction linearised on the geometry the calibration started from");
+    }
     let mut p = Refit {
         base: config,
         like,
@@ -1100,10 +1104,9 @@ fn refine_linearised_at(
     for _ in 0..FRICTION_RELINEARISATIONS {
         let Ok(f) = &fit else { break };
         let moved = p.friction.is_some()
-            && (std::mem::take(&mut stale)
-                || p.slots.iter().enumerate().any(|(k, s)| {
-                    s.moves_curvatures && (f.x[k] - x0[k]).abs() > 1e-3 * x0[k].abs().max(1.0)
-                }));
+            && p.slots.iter().enumerate().any(|(k, s)| {
+                s.moves_curvatures && (f.x[k] - x0[k]).abs() > 1e-3 * x0[k].abs().max(1.0)
+            });
         if !moved {
             break;
         }
@@ -1276,10 +1279,9 @@ mod tests {
         assert_eq!(all[n - 1], 0.0);
     }
 
-    /// A refinement started on another geometry's linearisation of the friction takes it only
-    /// where that robot file differs from its own and holds the same values of the refined
-    /// parameters (to the bit), and then calls it stale (linearised again where its first solve
-    /// arrives).
+    /// A refinement takes another geometry's linearisation of the friction only where that
+    /// robot file differs from its own and holds the same values of the refined parameters (to
+    /// the bit).
     #[test]
     fn a_linearisation_on_another_geometry_serves_only_the_same_values_and_is_stale() {
         let mut config = RobotConfig::nominal();
