@@ -1230,7 +1230,7 @@ fn from_drawing<'a>(
         let cal = crate::recalibration::recalibrated(config, ctx, set.drawing, recal)?;
         let (refined, errors) = crate::refine::search_linearised_at(
             &cal,
-            config,
+            Some(config),
             &ctx.model,
             set.series,
             set.blocks,

@@ -1022,27 +1022,18 @@ impl ExtendedModel {
     }
 
     /// [`ExtendedModel::friction_path`] with the displacement of the joints M_i at every row
-    /// (base frame, mm): what the friction does to the markers a calibration reads.
+    /// (base frame, mm): what the friction does to the markers a calibration reads. With
+    /// `linearised`, from the pass with the derivatives by the friction's values
+    /// ([`ExtendedModel::friction_path_tangent`]), made and kept where none is: the pass a
+    /// refinement of this model's effects then linearises its friction with.
     pub fn friction_path_with_joints(
         &self,
         rigid: &RigidPath,
         kappa: &[[f64; 3]],
         f: &Friction,
+        linearised: bool,
     ) -> Vec<Option<DeflectionAndJoints>> {
-        let rows = self.kept_pass(rigid, kappa, f, false);
-        rows.iter().map(|r| r.map(|r| (r.d, r.joints))).collect()
-    }
-
-    /// [`ExtendedModel::friction_path_with_joints`] from the pass with the derivatives by the
-    /// friction's values ([`ExtendedModel::friction_path_tangent`]), made and kept where none is:
-    /// the pass a refinement of this model's effects then linearises its friction with.
-    pub fn friction_path_with_joints_linearised(
-        &self,
-        rigid: &RigidPath,
-        kappa: &[[f64; 3]],
-        f: &Friction,
-    ) -> Vec<Option<DeflectionAndJoints>> {
-        let rows = self.kept_pass(rigid, kappa, f, true);
+        let rows = self.kept_pass(rigid, kappa, f, linearised);
         rows.iter().map(|r| r.map(|r| (r.d, r.joints))).collect()
     }
 
@@ -1805,9 +1796,19 @@ mod tests {
         // Given again (kept, or made again when another test forgot it), the same to the bit.
         assert_eq!(m.friction_path_tangent(&rigid, &kappa, &f), tangent);
         assert_eq!(m.friction_path(&rigid, &kappa, &f), plain);
-        let joints = m.friction_path_with_joints(&rigid, &kappa, &f);
+        let joints = m.friction_path_with_joints(&rigid, &kappa, &f, false);
         forget_kept();
-        assert_eq!(m.friction_path_with_joints(&rigid, &kappa, &f), joints);
+        assert_eq!(
+            m.friction_path_with_joints(&rigid, &kappa, &f, false),
+            joints
+        );
+        assert_eq!(m.friction_path_tangent(&rigid, &kappa, &f), tangent);
+        // Asked for from the pass with the derivatives: the same joints, and that pass kept.
+        forget_kept();
+        assert_eq!(
+            m.friction_path_with_joints(&rigid, &kappa, &f, true),
+            joints
+        );
         assert_eq!(m.friction_path_tangent(&rigid, &kappa, &f), tangent);
         // Another friction is another pass.
         let stronger = Friction {

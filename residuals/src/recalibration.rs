@@ -126,8 +126,7 @@ fn static_data(config: &RobotConfig, ctx: &Context, recal: &Recalibration) -> Op
     let rubbing = ctx.model.friction.as_ref().map(|f| {
         let paths = ctx.paths();
         let (rigid, kappa) = &paths[recal.series];
-        ctx.model
-            .friction_path_with_joints_linearised(rigid, kappa, f)
+        ctx.model.friction_path_with_joints(rigid, kappa, f, true)
     });
     for p in &mut data.poses {
         let s = &p.settled;

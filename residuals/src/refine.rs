@@ -856,17 +856,7 @@ pub(crate) fn search_with_errors(
     w_phi: f64,
     errors: Errors,
 ) -> (RobotConfig, Option<Vec<f64>>) {
-    refine_with_errors(
-        config,
-        like,
-        series,
-        blocks,
-        w_phi,
-        SEARCH_ROWS,
-        true,
-        MAX_EVALUATIONS,
-        errors,
-    )
+    search_linearised_at(config, None, like, series, blocks, w_phi, errors)
 }
 
 /// The standard errors a refinement gives with its configuration ([`refine_with_errors`]).
@@ -924,11 +914,11 @@ pub(crate) fn refine_with_errors(
     )
 }
 
-/// [`search_with_errors`] with the friction linearised on the geometry of `at`, a robot file
-/// whose effects are `config`'s ([`refine_linearised_at`]).
+/// [`search_with_errors`] with the friction linearised on the geometry of `at` where given, a
+/// robot file whose effects are `config`'s ([`refine_linearised_at`]).
 pub(crate) fn search_linearised_at(
     config: &RobotConfig,
-    at: &RobotConfig,
+    at: Option<&RobotConfig>,
     like: &ExtendedModel,
     series: &[Series],
     blocks: &Blocks,
@@ -945,7 +935,7 @@ pub(crate) fn search_linearised_at(
         true,
         MAX_EVALUATIONS,
         errors,
-        Some(at),
+        at,
     )
 }
 
