@@ -122,7 +122,7 @@ pub(crate) fn accept<'a>(
     let refined = crate::refine::search(&cfg, &ctx.model, series, blocks, w_phi);
     // The model returned is predicted with its friction's derivatives: the calibration from
     // the drawing that follows reads that pass, and the refinement after it linearises its
-    // friction with the same pass (`refine::search_linearised_at`).
+    // friction with the same pass (`refine::search_with_errors`).
     let linearised = |mut m: ExtendedModel| {
         m.friction_derivatives = true;
         m

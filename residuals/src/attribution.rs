@@ -889,6 +889,7 @@ impl<'a> Search<'a> {
                 true,
                 evaluations,
                 crate::refine::Errors::AtOptimum,
+                None,
             )
         };
         set.opts.progress.stage(
@@ -1228,7 +1229,7 @@ fn from_drawing<'a>(
                      ctx: &Context<'a>|
      -> Option<(RobotConfig, Context<'a>, Option<Vec<f64>>)> {
         let cal = crate::recalibration::recalibrated(config, ctx, set.drawing, recal)?;
-        let (refined, errors) = crate::refine::search_linearised_at(
+        let (refined, errors) = crate::refine::search_with_errors(
             &cal,
             Some(config),
             &ctx.model,

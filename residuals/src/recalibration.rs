@@ -122,7 +122,7 @@ fn static_data(config: &RobotConfig, ctx: &Context, recal: &Recalibration) -> Op
     // The friction's deflection of every row of the series (the pose and the joints M_i): at
     // rest each visit holds what its approach left stuck. The pass is made with the
     // derivatives, which the refinement of the effects on this calibration linearises its
-    // friction with (`refine::search_linearised_at`): 1.4 passes instead of two.
+    // friction with (`refine::search_with_errors`): 1.4 passes instead of two.
     let rubbing = ctx.model.friction.as_ref().map(|f| {
         let paths = ctx.paths();
         let (rigid, kappa) = &paths[recal.series];

@@ -830,6 +830,7 @@ pub fn refine(
         calibration,
         MAX_EVALUATIONS,
         Errors::No,
+        None,
     )
     .0
 }
@@ -843,20 +844,7 @@ pub(crate) fn search(
     blocks: &Blocks,
     w_phi: f64,
 ) -> RobotConfig {
-    search_with_errors(config, like, series, blocks, w_phi, Errors::No).0
-}
-
-/// [`search`] with the standard errors `errors` asks for ([`Errors::No`] or
-/// [`Errors::Approximate`]); `None` as [`refine_with_errors`] gives it.
-pub(crate) fn search_with_errors(
-    config: &RobotConfig,
-    like: &ExtendedModel,
-    series: &[Series],
-    blocks: &Blocks,
-    w_phi: f64,
-    errors: Errors,
-) -> (RobotConfig, Option<Vec<f64>>) {
-    search_linearised_at(config, None, like, series, blocks, w_phi, errors)
+    search_with_errors(config, None, like, series, blocks, w_phi, Errors::No).0
 }
 
 /// The standard errors a refinement gives with its configuration ([`refine_with_errors`]).
@@ -875,48 +863,10 @@ pub(crate) enum Errors {
     AtOptimum,
 }
 
-/// [`refine`] (at most `max_evaluations` of the model), with the standard errors of the
-/// effects' parameters ([`values`]' order, the solver's units) on the rows it refined on, as
-/// `errors` asks ([`Errors`]):
-/// clustered by time block as the linear fits'
-/// ([`crate::linear::standard_errors`]), the calibration parameters' prior weighed as in theirs
-/// ([`crate::linear::PRIOR_IN_ERRORS`]). `None` when there is nothing to refine or the solver
-/// fails, and with [`Errors::No`]; only [`Errors::AtOptimum`] has the solver evaluate the
-/// Jacobian at the optimum (a Jacobian costs the model's responses on every refined row, about
-/// a tenth of a loaded refinement).
-///
-/// A refinement on a subsample estimates with the subsample's noise: the errors of the fit
-/// that found an effect (every training row) are then too small for the values the model
-/// holds (periodic-10x: 10.014 +- 0.0032 steps from 2,938 of 44,071 rows, 4.3 errors off).
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn refine_with_errors(
-    config: &RobotConfig,
-    like: &ExtendedModel,
-    series: &[Series],
-    blocks: &Blocks,
-    w_phi: f64,
-    max_rows: usize,
-    calibration: bool,
-    max_evaluations: usize,
-    errors: Errors,
-) -> (RobotConfig, Option<Vec<f64>>) {
-    refine_linearised_at(
-        config,
-        like,
-        series,
-        blocks,
-        w_phi,
-        max_rows,
-        calibration,
-        max_evaluations,
-        errors,
-        None,
-    )
-}
-
-/// [`search_with_errors`] with the friction linearised on the geometry of `at` where given, a
-/// robot file whose effects are `config`'s ([`refine_linearised_at`]).
-pub(crate) fn search_linearised_at(
+/// [`search`] with the standard errors `errors` asks for ([`Errors::No`] or
+/// [`Errors::Approximate`]; `None` as [`refine_with_errors`] gives it), the friction linearised
+/// on the geometry of `at` where given, a robot file whose effects are `config`'s.
+pub(crate) fn search_with_errors(
     config: &RobotConfig,
     at: Option<&RobotConfig>,
     like: &ExtendedModel,
@@ -925,7 +875,7 @@ pub(crate) fn search_linearised_at(
     w_phi: f64,
     errors: Errors,
 ) -> (RobotConfig, Option<Vec<f64>>) {
-    refine_linearised_at(
+    refine_with_errors(
         config,
         like,
         series,
@@ -940,7 +890,7 @@ pub(crate) fn search_linearised_at(
 }
 
 /// Where a refinement of `config`'s parameters `slots` linearises its friction first, and
-/// whether that linearisation is stale ([`refine_linearised_at`]): at `at` where it is another
+/// whether that linearisation is stale ([`refine_with_errors`]): at `at` where it is another
 /// robot file with the same values of those parameters (to the bit), else at `config`.
 fn linearisation_start<'c>(
     config: &'c RobotConfig,
@@ -958,9 +908,23 @@ fn linearisation_start<'c>(
     }
 }
 
-/// [`refine_with_errors`] with the friction linearised ([`FrozenFriction`]) on the geometry of
-/// `at` where given, another robot file with the same values of the refined parameters: the
-/// one a calibration from the drawing started from, whose pass along every row that calibration
+/// [`refine`] (at most `max_evaluations` of the model), with the standard errors of the
+/// effects' parameters ([`values`]' order, the solver's units) on the rows it refined on, as
+/// `errors` asks ([`Errors`]):
+/// clustered by time block as the linear fits'
+/// ([`crate::linear::standard_errors`]), the calibration parameters' prior weighed as in theirs
+/// ([`crate::linear::PRIOR_IN_ERRORS`]). `None` when there is nothing to refine or the solver
+/// fails, and with [`Errors::No`]; only [`Errors::AtOptimum`] has the solver evaluate the
+/// Jacobian at the optimum (a Jacobian costs the model's responses on every refined row, about
+/// a tenth of a loaded refinement).
+///
+/// A refinement on a subsample estimates with the subsample's noise: the errors of the fit
+/// that found an effect (every training row) are then too small for the values the model
+/// holds (periodic-10x: 10.014 +- 0.0032 steps from 2,938 of 44,071 rows, 4.3 errors off).
+///
+/// The friction is linearised ([`FrozenFriction`]) on the geometry of `at` where given,
+/// another robot file with the same values of the refined parameters: the one a calibration
+/// from the drawing started from, whose pass along every row that calibration
 /// made with the derivatives ([`crate::recalibration`]). One pass with the derivatives then
 /// replaces a pass without them and one with them, 0.15-0.2 s of each alternation. The
 /// refinement holds the friction's deflection on the geometry as it does while its own
@@ -974,7 +938,7 @@ fn linearisation_start<'c>(
 /// friction at 3x the joints' pre-sliding travel, which the data tell poorly, then went to its
 /// bound in the friction's alternation, and the plays came out 3.6 errors off.
 #[allow(clippy::too_many_arguments)]
-fn refine_linearised_at(
+pub(crate) fn refine_with_errors(
     config: &RobotConfig,
     like: &ExtendedModel,
     series: &[Series],
