@@ -444,7 +444,9 @@ struct PassRow {
 /// and linearises its friction; the calibration from the drawing reading the joints of the
 /// pass the prediction made). A pass is the same when the legs, the path (every rigid pose and
 /// curvature, the stairs' too, to the bit) and the friction are: its answer is then the same
-/// to the bit. A pass with the derivatives answers one asked without them.
+/// to the bit. A pass with the derivatives answers one asked without them, and one at a
+/// negligible joints' couple one at zero couple (to the bit too, its derivatives by the joints'
+/// values zeroed).
 mod kept {
     use super::{PassRow, RigidPath};
     use crate::series::Series;
@@ -595,6 +597,36 @@ mod kept {
         v(a) == v(b)
     }
 
+    /// Whether the pass kept with `kept` answers as one with `asked` would where `asked`'s
+    /// joints do not rub (a couple of zero) and `kept`'s couple is negligible
+    /// ([`pcr_kinematics::friction::NEGLIGIBLE_COUPLE`]: the equilibrium leaves those joints
+    /// out): the same supports' friction and bending stiffness. Its derivatives by the joints'
+    /// couple and travel are not the asked pass's (zero: no joints there), and are zeroed
+    /// ([`asked_at_zero_couple`]). A fit that holds the couple at zero steps from the model's
+    /// couple (1e-25 N mm, its bound approached from inside) to zero, and asked for the pass
+    /// again (the consistency check of the supports' friction, 0.3 s).
+    fn negligible_for(kept: &Friction, asked: &Friction) -> bool {
+        let v = |f: &Friction| [f.support_force, f.support_presliding, f.ei].map(f64::to_bits);
+        asked.joint_torque == 0.0
+            && kept.joint_torque <= pcr_kinematics::friction::NEGLIGIBLE_COUPLE
+            && v(kept) == v(asked)
+    }
+
+    /// The rows of a pass kept at a negligible joints' couple as a pass at zero couple answers
+    /// them ([`negligible_for`]): the derivatives by the joints' couple and pre-sliding travel
+    /// zero.
+    fn asked_at_zero_couple(rows: &[Option<PassRow>]) -> Vec<Option<PassRow>> {
+        rows.iter()
+            .map(|r| {
+                r.map(|mut r| {
+                    r.t[0] = [0.0; 3];
+                    r.t[2] = [0.0; 3];
+                    r
+                })
+            })
+            .collect()
+    }
+
     /// The kept pass of `config`'s legs along `rigid` with `f` (one with the derivatives where
     /// `tangent`).
     pub(super) fn find(
@@ -604,16 +636,20 @@ mod kept {
         f: &Friction,
         tangent: bool,
     ) -> Option<Arc<Vec<Option<PassRow>>>> {
-        PASSES.find(
-            |k| {
-                (k.tangent || !tangent)
-                    && same_friction(&k.f, f)
-                    && k.legs.are(config)
-                    && same_rows(&k.kappa, kappa)
-                    && same_path(&k.rigid, rigid)
-            },
-            |k| k.rows.clone(),
-        )
+        let same = |k: &Pass| {
+            (k.tangent || !tangent)
+                && k.legs.are(config)
+                && same_rows(&k.kappa, kappa)
+                && same_path(&k.rigid, rigid)
+        };
+        PASSES
+            .find(|k| same_friction(&k.f, f) && same(k), |k| k.rows.clone())
+            .or_else(|| {
+                PASSES.find(
+                    |k| negligible_for(&k.f, f) && same(k),
+                    |k| Arc::new(asked_at_zero_couple(&k.rows)),
+                )
+            })
     }
 
     /// Keeps a pass made ([`find`]'s arguments).
@@ -1775,7 +1811,9 @@ mod tests {
 
     /// A friction pass given again from the kept ones ([`kept`]) is the pass made afresh, to the
     /// bit; one without the derivatives does not answer one with them; another friction is
-    /// another pass; and a prediction made with the derivatives predicts what one without does.
+    /// another pass, but one at a negligible joints' couple answers one at zero couple as that
+    /// one made afresh does; and a prediction made with the derivatives predicts what one
+    /// without does.
     #[test]
     fn a_kept_friction_pass_is_the_pass_made_again() {
         let (s, m, f, kappa, rigid) = rubbing_path(300);
@@ -1816,6 +1854,28 @@ mod tests {
             ..f
         };
         assert_ne!(m.friction_path(&rigid, &kappa, &stronger), plain);
+        // A pass at a negligible joints' couple serves one at zero couple: what the pass made
+        // at zero couple answers, to the bit (the derivatives by the joints' values zero).
+        let (negligible, zero) = (
+            Friction {
+                joint_torque: 1e-25,
+                ..f
+            },
+            Friction {
+                joint_torque: 0.0,
+                ..f
+            },
+        );
+        forget_kept();
+        let fresh = m.friction_path_tangent(&rigid, &kappa, &zero);
+        forget_kept();
+        let at_negligible = m.friction_path_tangent(&rigid, &kappa, &negligible);
+        assert!(at_negligible
+            .iter()
+            .flatten()
+            .any(|(_, t)| t[0].iter().any(|v| *v != 0.0)));
+        assert_eq!(m.friction_path_tangent(&rigid, &kappa, &zero), fresh);
+        assert!(fresh.iter().flatten().all(|(_, t)| t[0] == [0.0; 3]));
         // A prediction with the derivatives is the prediction.
         let mut with = m.clone();
         with.friction_derivatives = true;
