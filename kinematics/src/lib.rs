@@ -10,6 +10,7 @@ pub mod check;
 pub mod fk;
 pub mod friction;
 pub mod ik;
+mod inverse;
 pub mod jacobian;
 pub mod leg;
 pub mod lu3;

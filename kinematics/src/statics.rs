@@ -775,9 +775,8 @@ impl Robot {
             }
             if inv.is_none() {
                 let segs = self.segments_at(setup, loads, &z);
-                *inv = self
-                    .loaded_jacobian(setup, loads, &z, &segs, &f)
-                    .try_inverse();
+                *inv =
+                    crate::inverse::try_inverse(&self.loaded_jacobian(setup, loads, &z, &segs, &f));
                 last = f64::INFINITY;
             }
             let Some(h) = inv.as_mut() else {
@@ -1165,9 +1164,7 @@ impl Robot {
         let (segs, exact, terms) = self.segments_and_terms_at(&st, loads, &z);
         let f0 = self.loaded_eval(&st, loads, &z, SegmentMode::Linear(&segs));
         // The whole inverse: the pose's rows, and the next solve's chord (the state keeps it).
-        let inv = self
-            .loaded_jacobian(&st, loads, &z, &segs, &f0)
-            .try_inverse()
+        let inv = crate::inverse::try_inverse(&self.loaded_jacobian(&st, loads, &z, &segs, &f0))
             .ok_or(FkError::NoSolution { reached: 0.0 })?;
         let rows = PoseRows(std::array::from_fn(|k| inv.row(k).transpose()));
         warm.inv = Some(inv);
