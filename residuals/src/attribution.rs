@@ -513,18 +513,39 @@ impl<'a> Search<'a> {
         set.opts
             .progress
             .stage(round, "fitting candidates", ctx.rows.len(), names.len());
-        let fitted_all: Vec<Option<Fitted>> = names
-            .par_iter()
-            .map(|name| {
-                let f = timed(name, &|| {
-                    effects::named(name)
-                        .filter(|e| e.role() != Role::Reference)
-                        .and_then(|e| e.fit(ctx, &train))
-                });
-                set.opts.progress.step();
-                f
-            })
-            .collect();
+        // The candidates fitted last ([`effects::Effect::fitted_last`]: the friction, whose
+        // re-linearisations are passes along every row) are fitted against the best training
+        // error of the others.
+        let last = |name: &String| effects::named(name).is_some_and(|e| e.fitted_last());
+        let fit_each = |names: Vec<(usize, &&String)>, beaten: Option<f64>| {
+            names
+                .into_par_iter()
+                .map(|(i, name)| {
+                    let f = timed(name, &|| {
+                        let e = effects::named(name).filter(|e| e.role() != Role::Reference)?;
+                        match beaten {
+                            Some(b) => e.fit_against(ctx, &train, b),
+                            None => e.fit(ctx, &train),
+                        }
+                    });
+                    set.opts.progress.step();
+                    (i, f)
+                })
+                .collect::<Vec<_>>()
+        };
+        let (later, first): (Vec<_>, Vec<_>) = names.iter().enumerate().partition(|(_, n)| last(n));
+        let mut fitted_all: Vec<Option<Fitted>> = vec![None; names.len()];
+        for (i, f) in fit_each(first, None) {
+            fitted_all[i] = f;
+        }
+        let beaten = fitted_all
+            .iter()
+            .flatten()
+            .map(|f| f.train_sse)
+            .fold(f64::INFINITY, f64::min);
+        for (i, f) in fit_each(later, Some(beaten)) {
+            fitted_all[i] = f;
+        }
         let scoring = Round {
             round,
             ctx,

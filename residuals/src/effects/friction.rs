@@ -66,6 +66,15 @@ const SSE_SETTLED: f64 = 0.005;
 /// to be re-linearised (otherwise the data show no friction and the first step stands).
 const SIGNIFICANT: f64 = 3.0;
 
+/// Re-linearisations a fit's training error is extrapolated over, each taking off the share the
+/// last one took, to judge whether it can still come below another candidate's
+/// ([`Effect::fit_against`]). The first re-linearisation from no friction takes off the most
+/// (184284 -> 30300 -> 12548 on backlash + friction at 3x, 7281 -> 2386 at 1x) and the later
+/// ones far less; on joint springs + frame + backlash at 3x (no friction) the fit went 131616 ->
+/// 107721 -> 106183 -> 106178 beside springs at 60288, two passes (0.4 s) for a candidate that
+/// could not win.
+const EXTRAPOLATED_STEPS: i32 = 2;
+
 /// The friction entry of a robot file's effects, with zero limits and the assumed pre-sliding
 /// travels and bending stiffness (the compliance's, when the file declares one) when it
 /// declares none.
@@ -390,13 +399,16 @@ fn stepped(theta: Theta, x: Theta) -> Theta {
 /// friction only where a limit comes out significant), up to `steps` times. A limit a step
 /// takes below zero is held at zero and the step made again without it (the bounded fit: a
 /// support that does not rub is no support pushing along the motion); without
-/// `free_presliding` the joints' pre-sliding travel is held at its start.
+/// `free_presliding` the joints' pre-sliding travel is held at its start. With `beaten` (another
+/// candidate's training error), the re-linearisations end where the fit can no longer come
+/// below it ([`EXTRAPOLATED_STEPS`]).
 fn fit_from(
     ctx: &Context,
     train: &[usize],
     start: Option<Theta>,
     steps: usize,
     free_presliding: bool,
+    beaten: Option<f64>,
 ) -> Option<Fitted> {
     let entry = held(&ctx.model.config.effects);
     let at = deflections(ctx, &entry);
@@ -458,6 +470,20 @@ fn fit_from(
         let sse = step.fit.0.sse;
         tracing::debug!(?theta, x = ?step.x, sse, left, "friction step");
         if left == 0 || last_sse.is_some_and(|p: f64| (p - sse).abs() <= SSE_SETTLED * p) {
+            break;
+        }
+        // Nor where the error, falling on as the last re-linearisation made it fall, would
+        // not come below another candidate's of the round ([`EXTRAPOLATED_STEPS`]).
+        let hopeless = last_sse.zip(beaten).is_some_and(|(p, b)| {
+            let r = sse / p;
+            r < 1.0 && sse * r.powi(EXTRAPOLATED_STEPS) > b
+        });
+        if hopeless {
+            tracing::debug!(
+                sse,
+                beaten,
+                "friction fit stops: another candidate is below it"
+            );
             break;
         }
         last_sse = Some(sse);
@@ -557,7 +583,19 @@ impl Effect for Friction {
     /// The joints' and the supports' limits with the calibration parameters, linearised at the
     /// model's friction and re-linearised at the estimate ([`RELINEARISATIONS`]).
     fn fit(&self, ctx: &Context, train: &[usize]) -> Option<Fitted> {
-        fit_from(ctx, train, None, RELINEARISATIONS, true)
+        fit_from(ctx, train, None, RELINEARISATIONS, true, None)
+    }
+
+    /// [`Effect::fit`], its re-linearisations ended where it can no longer come below the
+    /// round's best other candidate ([`EXTRAPOLATED_STEPS`]).
+    fn fit_against(&self, ctx: &Context, train: &[usize], beaten: f64) -> Option<Fitted> {
+        fit_from(ctx, train, None, RELINEARISATIONS, true, Some(beaten))
+    }
+
+    /// Each re-linearisation is a pass with the derivatives along every row (a fifth of a
+    /// second on the sweep's recordings), the other candidates' fits a few hundredths.
+    fn fitted_last(&self) -> bool {
+        true
     }
 
     /// One linearised step from the model's friction, not re-linearised: the acceptance's own
@@ -565,7 +603,7 @@ impl Effect for Friction {
     /// well, a step took five passes with the derivatives, the joints' pre-sliding travel
     /// swinging between 0.9 and 3.6 mrad from pass to pass on backlash + friction at 3x).
     fn step(&self, ctx: &Context, train: &[usize]) -> Option<Fitted> {
-        fit_from(ctx, train, None, 0, true)
+        fit_from(ctx, train, None, 0, true, None)
     }
 
     /// One step from the whole fit's values, the joints' pre-sliding travel held there: a shape
@@ -580,7 +618,7 @@ impl Effect for Friction {
         let start = get("joint torque")
             .zip(get("support force"))
             .map(|(a, b)| [a.max(0.0), b.max(0.0), presliding]);
-        fit_from(ctx, train, start, 1, false)
+        fit_from(ctx, train, start, 1, false, None)
     }
 
     fn declared(&self, effects: &Effects, _fitted: &[Estimate]) -> Option<Vec<Estimate>> {

@@ -148,6 +148,20 @@ pub trait Effect: Extension {
     /// of the current model's residuals; `None` when it cannot be fitted.
     fn fit(&self, ctx: &Context, train: &[usize]) -> Option<Fitted>;
 
+    /// [`Effect::fit`] in a round where another candidate's fit already left `beaten` of the
+    /// training error (its training SSE): an effect whose fit is re-linearised, a pass over
+    /// every row each time, stops re-linearising where it can no longer come below that
+    /// ([`Effect::fitted_last`]). [`Effect::fit`] by default.
+    fn fit_against(&self, ctx: &Context, train: &[usize], _beaten: f64) -> Option<Fitted> {
+        self.fit(ctx, train)
+    }
+
+    /// Whether a round fits it after the other candidates, against the best of them
+    /// ([`Effect::fit_against`]); false by default.
+    fn fitted_last(&self) -> bool {
+        false
+    }
+
     /// A Gauss-Newton step of its acceptance from a model that holds it: fits it again on
     /// `train` ([`Effect::fit`] by default).
     fn step(&self, ctx: &Context, train: &[usize]) -> Option<Fitted> {
