@@ -24,16 +24,7 @@ pub(crate) fn try_inverse<const N: usize>(a: &SMatrix<f64, N, N>) -> Option<SMat
         row[i] = 1.0;
     }
     for i in 0..N {
-        // The first largest magnitude on or below the diagonal (nalgebra's `icamax`).
-        let mut piv = i;
-        let mut best = m[i][i].abs();
-        for (r, row) in m.iter().enumerate().skip(i + 1) {
-            let v = row[i].abs();
-            if v > best {
-                best = v;
-                piv = r;
-            }
-        }
+        let piv = crate::lu3::pivot(&m, i);
         let diag = m[piv][i];
         if diag == 0.0 {
             return None;

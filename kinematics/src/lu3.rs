@@ -16,6 +16,22 @@ pub struct Lu3 {
     n_swaps: usize,
 }
 
+/// The row of column `i`'s pivot in `m` (row-major): the first largest magnitude on or below
+/// the diagonal, as nalgebra's `icamax` finds it (its LU decomposition's and inversion's).
+#[inline]
+pub(crate) fn pivot<const N: usize>(m: &[[f64; N]; N], i: usize) -> usize {
+    let mut piv = i;
+    let mut best = m[i][i].abs();
+    for (r, row) in m.iter().enumerate().skip(i + 1) {
+        let v = row[i].abs();
+        if v > best {
+            best = v;
+            piv = r;
+        }
+    }
+    piv
+}
+
 impl Lu3 {
     /// Decomposes `a` (nalgebra's `LU::new`: the first largest magnitude of each column on or
     /// below the diagonal is the pivot; a column with none above zero is skipped).
@@ -30,15 +46,7 @@ impl Lu3 {
         let mut swaps = [(0, 0); 3];
         let mut n_swaps = 0;
         for i in 0..3 {
-            let mut piv = i;
-            let mut best = m[i][i].abs();
-            for (r, row) in m.iter().enumerate().skip(i + 1) {
-                let v = row[i].abs();
-                if v > best {
-                    best = v;
-                    piv = r;
-                }
-            }
+            let piv = pivot(&m, i);
             let diag = m[piv][i];
             if diag == 0.0 {
                 continue;
