@@ -44,9 +44,10 @@ pub(crate) fn try_inverse<const N: usize>(a: &SMatrix<f64, N, N>) -> Option<SMat
             }
         }
     }
-    // L y = P e_k for every column at once (L's diagonal is one: nalgebra divides by it).
+    // L y = P e_k for every column at once (L's diagonal is one: nalgebra's division by it
+    // leaves every value as it is).
     for i in 0..N - 1 {
-        let coeffs = b[i].map(|v| v / 1.0);
+        let coeffs = b[i];
         for r in i + 1..N {
             let l = m[r][i];
             for (x, c) in b[r].iter_mut().zip(&coeffs) {
