@@ -29,8 +29,8 @@
 #               named that is not in the data; held-out after/floor above --max-after-floor
 #               (cases with library effects only, at >= test strength, and the clean plant); a
 #               full-size analysis above --time-budget-s of cpu on one core (pinned; 0: no time rule;
-#               with --jobs above 1, a run over it is timed again alone, pinned, the other cores
-#               idle, and the rule reads that time; the table shows both)
+#               a run over it is timed again alone, pinned, the other cores idle, three times, and
+#               the rule reads the median of those; the table shows both)
 #   --jobs N    cases in parallel, each pinned to its own core (default 1: core 1)
 #   --reuse     report again from the analyses of an earlier run (no new analysis)
 # Environment: PCR_VALIDATION_TIME_BUDGET_S (default 10); PCR_BIN, the pcr to run (default: the
