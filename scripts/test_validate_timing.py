@@ -57,6 +57,11 @@ class TimeRule(unittest.TestCase):
         self.assertEqual(t, {"cpu_s": 10.4})
         self.assertEqual(vr.judged_cpu(t), 10.4)
 
+    def test_the_timings_are_said_with_their_median(self):
+        self.assertEqual(vr.alone_runs([11.2, 9.5, 9.9]), ", the median of 11.2, 9.5, 9.9")
+        # A run an earlier sweep timed alone once.
+        self.assertEqual(vr.alone_runs([]), "")
+
     def test_no_budget_no_rule(self):
         class Off:
             time_budget_s = 0.0

@@ -622,7 +622,7 @@ class Sweep:
         over = list(dict.fromkeys(over))
         if not over:
             return runs
-        self.say("timing %d case(s) over %.0f s again, one at a time, %d times each" % (
+        self.say("timing %d case(s) over %g s again, one at a time, %d times each" % (
             len(over), self.a.time_budget_s, ALONE_RUNS))
         by_id = {c.id: c for c in case_list}
         core = Cores(1).take()
@@ -632,8 +632,7 @@ class Sweep:
                 redone[(cid, seed, r["convention"])] = r
                 self.say("%-44s s%d %-7s %-6s %s" % (
                     cid, seed, r["convention"], "ok" if not r["failures"] else "FAIL",
-                    "alone: %.1f s cpu (median of %s)" % (
-                        r["cpu_alone_s"], ", ".join("%.1f" % c for c in r["cpu_alone_runs_s"]))
+                    "alone: %.1f s cpu%s" % (r["cpu_alone_s"], alone_runs(r["cpu_alone_runs_s"]))
                     if r.get("cpu_alone_s") is not None
                     else "within the budget in the sweep: not timed again"))
         return [redone.get((r["case"], r["seed"], r["convention"]), r) for r in runs]
@@ -688,6 +687,12 @@ def time_alone(cmd, cwd, log, core, t) -> bool:
     t["cpu_alone_s"] = statistics.median(cpus)
     t["wall_alone_s"] = statistics.median(w for _, w, _, _ in timed)
     return True
+
+
+def alone_runs(cpus) -> str:
+    """', the median of a, b, c' for the timings alone of a run (none from an earlier sweep
+    that timed a run alone once)."""
+    return ", the median of %s" % ", ".join("%.1f" % c for c in cpus) if cpus else ""
 
 
 def judged_cpu(t):
@@ -760,9 +765,8 @@ def evaluate(case, seed, conv, factors, res, t, floor, rows, err, args):
     # (`Sweep.retime_alone`: the median of ALONE_RUNS), for the full-size recordings.
     if over_budget(t, args) and (case.full_size or args.size == "full"):
         if t.get("cpu_alone_s") is not None:
-            failures.append("%.1f s cpu on one core (alone, the median of %s; %.1f s in the sweep)" % (
-                t["cpu_alone_s"], ", ".join("%.1f" % c for c in t.get("cpu_alone_runs_s") or []),
-                t["cpu_s"]))
+            failures.append("%.1f s cpu on one core (alone%s; %.1f s in the sweep)" % (
+                t["cpu_alone_s"], alone_runs(t.get("cpu_alone_runs_s") or []), t["cpu_s"]))
         else:
             failures.append("%.1f s cpu on one core" % t["cpu_s"])
     run["failures"] = failures
