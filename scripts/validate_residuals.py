@@ -947,12 +947,12 @@ def markdown(case_list, runs, aggs, limits, args, meta):
              "capture noise as it fell on the held-out rows). Coverage: runs with |est - truth| "
              "<= 2 stated std. Times: `pcr residuals` (calibration + analysis) pinned to one core "
              "(`taskset`), wall, beside another job when the sweep runs two at a time; [cpu alone]: a run "
-             "over the time budget timed again pinned with the other cores idle, three times, their "
+             "over the time budget timed again pinned with the other cores idle, %d times, their "
              "median (the time rule reads it); two cores: the chain convention of the first seed, unpinned, alone (after "
              "the other analyses when the sweep runs two at a time). Bias and "
              "spread of a parameter: over the seeds, chain convention; conventions agree: seeds "
              "where both name the same effects, and the largest difference of a parameter "
-             "between them in its stated std.\n")
+             "between them in its stated std.\n" % ALONE_RUNS)
     L.append("## Detection limit per effect\n")
     L.append("| effect | today's test strength | found in every run from | runs found per strength |")
     L.append("|---|---|---|---|")
