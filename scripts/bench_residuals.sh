@@ -5,14 +5,14 @@
 # configs/plant-ideal.toml (capture noise on, one effect on), records a calibration recording
 # (`pcr experiment calibration`, about 37-44k rows) and a holdout (about 16k rows, `--points 8
 # --test-per-group 3 --plant-seed 7 --seed 2`) once, then times
-# `pcr residuals --data cal.csv --holdout holdout.csv` with farm-bench on one core (`--pin 1`) and
-# on two (no pin), and prints a table: median wall and cpu, s; peak memory, MiB; what the analysis found.
+# `pcr residuals --data cal.csv --holdout holdout.csv` with scripts/inturn.py on one core (`--pin 1`)
+# and on two (no pin), and prints a table: median wall and cpu, s; peak memory, MiB; what the analysis found.
 #
 # Usage: scripts/bench_residuals.sh [PCR_BINARY] [OUT_DIR] [EFFECT ...]
 #   PCR_BINARY  the pcr to time (default target/release/pcr; also records the data)
 #   OUT_DIR     where plant files, recordings and results go (default out/bench-residuals)
 #   EFFECT      a subset of: clean backlash latency creep drift springs load frame
-# Environment: RUNS (farm-bench runs, default 3), WARMUP (runs not counted, default 1), TIMEOUT (farm-bench bound, s, default 900),
+# Environment: RUNS (scripts/inturn.py runs, default 3), WARMUP (runs not counted, default 1), TIMEOUT (scripts/inturn.py bound, s, default 900),
 # RECORDER (the pcr that records the data, default PCR_BINARY).
 # Not a check (CI does not run it): it takes minutes and its numbers depend on the machine.
 set -euo pipefail
@@ -72,7 +72,8 @@ plant_file() {
     echo "$f"
 }
 
-# median WHAT <farm-bench output: the median of its "A wall s", "A cpu s" or "A peak MiB" line.
+# median WHAT <scripts/inturn.py output: the median of its "A wall s", "A cpu s" or "A peak MiB"
+# line (who, figure, unit, min, median, max: the fifth field).
 median() {
     awk -v what="$1" '$1 == "A" && $2 == what { print $5; exit }'
 }
@@ -104,8 +105,8 @@ for e in "${EFFECTS[@]}"; do
     tag=$(basename "$PCR")
     cmd=("$PCR" residuals --robot "$ROOT/configs/robot.toml" --data "$d/cal.csv"
          --holdout "$d/holdout.csv" --json "$d/res-$tag.json")
-    (cd "$d" && farm-bench -n "$RUNS" --warmup "$WARMUP" --timeout "$TIMEOUT" --pin 1 -- "${cmd[@]}") >"$d/bench1-$tag.txt" 2>&1 || true
-    (cd "$d" && farm-bench -n "$RUNS" --warmup "$WARMUP" --timeout "$TIMEOUT" -- "${cmd[@]}") >"$d/bench2-$tag.txt" 2>&1 || true
+    (cd "$d" && "$ROOT/scripts/inturn.py" -n "$RUNS" --warmup "$WARMUP" --timeout "$TIMEOUT" --pin 1 -- "${cmd[@]}") >"$d/bench1-$tag.txt" 2>&1 || true
+    (cd "$d" && "$ROOT/scripts/inturn.py" -n "$RUNS" --warmup "$WARMUP" --timeout "$TIMEOUT" -- "${cmd[@]}") >"$d/bench2-$tag.txt" 2>&1 || true
     w1=$(median wall <"$d/bench1-$tag.txt"); c1=$(median cpu <"$d/bench1-$tag.txt")
     w2=$(median wall <"$d/bench2-$tag.txt"); c2=$(median cpu <"$d/bench2-$tag.txt")
     pk=$(median peak <"$d/bench1-$tag.txt")
