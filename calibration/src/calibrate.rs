@@ -21,6 +21,7 @@ use pcr_kinematics::Robot;
 use pcr_recording::{Recording, Split};
 use pcr_robot::effects::FrameCorrection;
 use pcr_robot::{MapForm, MapReading, RobotConfig, TendonMapKind};
+use rayon::prelude::*;
 use serde::Serialize;
 
 /// Which parameter sets the two steps free.
@@ -668,8 +669,9 @@ fn table_one(
     has_test: bool,
     only: Option<TendonMapKind>,
 ) -> Vec<TableRow> {
+    // The functions' fits are independent of one another: one per thread, in Table I's order.
     TendonMapKind::ALL
-        .iter()
+        .par_iter()
         .map(|&kind| match only {
             Some(k) if k != kind => not_fitted(kind, k),
             _ => table_row(start, obs, travel, free, kind, readings, has_test),
@@ -713,7 +715,7 @@ fn table_row(
 ) -> TableRow {
     let fits: Vec<ReadingFit> = readings
         .fitted()
-        .iter()
+        .par_iter()
         .map(|&reading| reading_fit(start, obs, travel, free, MapForm { kind, reading }))
         .collect();
     // Each leg: the selectable fit with the lower held-out error (AIC without test points).
@@ -799,16 +801,23 @@ fn reading_fit(
     free: FreeGeometry,
     form: MapForm,
 ) -> ReadingFit {
+    // The legs' fits are independent: one per thread, gathered in the legs' order.
+    let fitted: Vec<Result<LegFit, Step1Error>> = (0..3)
+        .into_par_iter()
+        .map(|i| {
+            let what = format!("leg {}", i + 1);
+            let (train, test) = &obs[i];
+            step1::fit_leg(&what, Some(i), &start.legs[i], free, form, train, test).map(|mut f| {
+                f.refused = map_refusal(&f.config, travel[i], &obs[i]);
+                f
+            })
+        })
+        .collect();
     let mut legs = Vec::with_capacity(3);
     let mut errors = Vec::new();
-    for i in 0..3 {
-        let what = format!("leg {}", i + 1);
-        let (train, test) = &obs[i];
-        match step1::fit_leg(&what, Some(i), &start.legs[i], free, form, train, test) {
-            Ok(mut f) => {
-                f.refused = map_refusal(&f.config, travel[i], &obs[i]);
-                legs.push(f);
-            }
+    for f in fitted {
+        match f {
+            Ok(f) => legs.push(f),
             Err(e) => errors.push(e.to_string()),
         }
     }

@@ -21,6 +21,7 @@
 use crate::context::Context;
 use crate::effects::{Effect, Parts};
 use crate::fitted::{significant, Estimate};
+use rayon::prelude::*;
 
 /// Fewest training rows a part needs for the check (fewer: not checked).
 pub const MIN_ROWS: usize = 400;
@@ -108,10 +109,15 @@ pub fn inconsistency(
         ],
         p => vec![p],
     };
-    checks.into_iter().find_map(|p| {
+    // The checks, and the two parts of each, are fitted independently: one per thread, the
+    // first disagreement in the checks' order reported.
+    checks.into_par_iter().find_map_first(|p| {
         let (parts, names) = split(p, ctx, train)?;
-        let fa = effect.fit_like(ctx, &parts[0], whole)?;
-        let fb = effect.fit_like(ctx, &parts[1], whole)?;
+        let (fa, fb) = rayon::join(
+            || effect.fit_like(ctx, &parts[0], whole),
+            || effect.fit_like(ctx, &parts[1], whole),
+        );
+        let (fa, fb) = (fa?, fb?);
         let disagree = disagreements(whole, &fa.params, &fb.params);
         (!disagree.is_empty()).then(|| {
             format!(

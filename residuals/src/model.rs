@@ -138,13 +138,26 @@ pub struct Sensitivity {
     pub d_loads: [[f64; 3]; 5],
 }
 
-/// Rows of a series a friction pass answers in one piece at most ([`along_path`]): the pieces
-/// run in parallel, each from a history rebuilt over the configurations before it. A series of
-/// 44k rows is six pieces: the rebuilding costs 5 % more work in all (backlash + friction at
-/// 3x), and about twice that in pieces of 4096 rows. A series of half this length or more is
-/// cut into an even number of pieces, so that two cores share them evenly: the held-out 17k
-/// rows in three pieces kept one core idle for a third of each of their passes.
+/// Rows of a series per piece of a friction pass ([`along_path`]), on average: the pieces run
+/// in parallel, each from a history rebuilt over the configurations before it. A series of 44k
+/// rows is six pieces: the rebuilding costs 5 % more work in all (backlash + friction at 3x),
+/// and about twice that in pieces of 4096 rows. A series of half this length or more is cut
+/// into an even number of pieces, so that two cores share them evenly: the held-out 17k rows
+/// in three pieces kept one core idle for a third of each of their passes.
 const PASS_CHUNK: usize = 8192;
+
+/// The pieces' shares of a friction pass of `count` pieces ([`RigidPath::piece_starts`]), in
+/// order along the path: two of each weight, the largest first (6 pieces: 3, 3, 2, 2, 1, 1).
+/// The pieces are answered in that order, each by the first core free ([`along_path_in`]), so
+/// that the smallest come last and fill the time one core would otherwise wait for the other:
+/// with six equal pieces each core took three, and their times differed by up to a third (the
+/// configurations' cost varies with how many elements slip).
+fn piece_weights(count: usize) -> Vec<usize> {
+    if count < 4 || count % 2 == 1 {
+        return vec![1; count];
+    }
+    (0..count).map(|j| count / 2 - j / 2).collect()
+}
 
 /// Configurations passed between rows (the stairs' steps, [`RigidPath::stairs`]) a piece of a
 /// friction pass runs through before its first row, from every element unloaded, to rebuild
@@ -201,7 +214,8 @@ impl PassState for (FrictionState, pcr_kinematics::friction::FrictionTangent) {
 /// Before each row, the elements are taken through the configurations its legs' steps passed
 /// since the row before ([`RigidPath::stairs`]); only the row's own answer is kept.
 ///
-/// The rows are answered in pieces of equal length, at most [`PASS_CHUNK`], in parallel. A
+/// The rows are answered in pieces in parallel, as many as pieces of [`PASS_CHUNK`] rows make,
+/// cut by the configurations they pass and largest first ([`piece_weights`]). A
 /// piece after the first rebuilds the history it starts from: from every element unloaded,
 /// through the rows before it that pass [`BURN_IN_CONFIGURATIONS`] configurations (a friction
 /// element's history is wiped where it slips, and the moves make every element slip). Then, in
@@ -287,34 +301,56 @@ fn along_path_in<S: PassState, T: Send>(
     } else {
         count
     };
-    let size = n.div_ceil(count).max(1);
-    let starts: Vec<usize> = (0..n).step_by(size).collect();
-    let answered: Vec<Piece<S, T>> = starts
-        .par_iter()
-        .map(|&first| {
-            let rows = first..(first + size).min(n);
-            let mut state = S::default();
-            let mut out = Vec::with_capacity(rows.len());
-            let rebuilt = (first > 0).then(|| {
-                run(&mut state, rigid.burn_in(first, pieces)..first, &mut out);
-                out.clear();
-                state.clone()
-            });
-            let mut checkpoints = Vec::new();
-            for stretch in stretches(rows.clone()) {
-                if stretch.start > first {
-                    checkpoints.push(state.clone());
-                }
-                run(&mut state, stretch, &mut out);
+    let starts = rigid.piece_starts(n, count);
+    let answer = |j: usize| {
+        let first = starts[j];
+        let rows = first..starts.get(j + 1).copied().unwrap_or(n);
+        let mut state = S::default();
+        let mut out = Vec::with_capacity(rows.len());
+        let rebuilt = (first > 0).then(|| {
+            run(&mut state, rigid.burn_in(first, pieces)..first, &mut out);
+            out.clear();
+            state.clone()
+        });
+        let mut checkpoints = Vec::new();
+        for stretch in stretches(rows.clone()) {
+            if stretch.start > first {
+                checkpoints.push(state.clone());
             }
-            Piece {
-                rows,
-                rebuilt,
-                out,
-                checkpoints,
-                end: state,
-            }
-        })
+            run(&mut state, stretch, &mut out);
+        }
+        Piece {
+            rows,
+            rebuilt,
+            out,
+            checkpoints,
+            end: state,
+        }
+    };
+    // The pieces in order, the largest first ([`piece_weights`]), each taken by the first core
+    // free.
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let slots: Vec<std::sync::Mutex<Option<Piece<S, T>>>> =
+        starts.iter().map(|_| std::sync::Mutex::new(None)).collect();
+    let take = || loop {
+        let j = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        if j >= starts.len() {
+            break;
+        }
+        let piece = answer(j);
+        if let Ok(mut slot) = slots[j].lock() {
+            *slot = Some(piece);
+        }
+    };
+    rayon::scope(|s| {
+        for _ in 1..rayon::current_num_threads().min(starts.len()) {
+            s.spawn(|_| take());
+        }
+        take();
+    });
+    let answered: Vec<Piece<S, T>> = slots
+        .into_iter()
+        .filter_map(|m| m.into_inner().ok().flatten())
         .collect();
     let mut out = Vec::with_capacity(n);
     let mut history: Option<S> = None;
@@ -389,6 +425,38 @@ pub struct RigidPath {
 }
 
 impl RigidPath {
+    /// The first rows of `count` pieces of the path's first `n` rows, in order along the path,
+    /// the configurations each passes (a row and the stair before it, [`RigidPath::stairs`])
+    /// in proportion to its weight ([`piece_weights`]): the work of a friction pass is in its
+    /// configurations, and a row at rest passes one where a moving row passes up to a dozen
+    /// (pieces of equal rows on the 44k rows of backlash + supports at 3x passed 14.6k to 19.2k
+    /// configurations).
+    fn piece_starts(&self, n: usize, count: usize) -> Vec<usize> {
+        let cost = |k: usize| 1 + self.stairs.get(k).map_or(0, Vec::len);
+        let total: usize = (0..n).map(cost).sum();
+        let weights = piece_weights(count);
+        let sum: usize = weights.iter().sum();
+        // The cumulative weight at each piece's start, in configurations times `sum`.
+        let mut bounds = weights.iter().scan(0, |acc, w| {
+            *acc += w;
+            Some(*acc * total)
+        });
+        let mut next = bounds.next();
+        let mut starts = vec![0];
+        let mut passed = 0;
+        for k in 0..n {
+            if starts.len() < count
+                && k > *starts.last().unwrap_or(&0)
+                && next.is_some_and(|b| passed * sum >= b)
+            {
+                starts.push(k);
+                next = bounds.next();
+            }
+            passed += cost(k);
+        }
+        starts
+    }
+
     /// The first row of the history rebuilt for a piece of a friction pass starting at row
     /// `first` ([`along_path`]): the last row before it at which the stairs from there to
     /// `first` pass `pieces.burn_in` configurations ([`BURN_IN_CONFIGURATIONS`]), at most a
@@ -826,7 +894,12 @@ impl ExtendedModel {
                 self.predict_range(s, range, &tendons, want, how)
             })
             .collect();
-        let mut preds = parts.concat();
+        // Gathered on every core (a series of 44k rows is 12 MB of predictions, one core's
+        // copy of it and its fresh pages 5-10 ms at each prediction).
+        let mut preds: Vec<Prediction> = (0..n)
+            .into_par_iter()
+            .map(|k| parts[k / chunk][k % chunk])
+            .collect();
         // The friction's history runs from the first row to the last one wanted (the rows after
         // it are not predicted; a series none of whose rows is wanted, e.g. the holdout in a
         // training context, takes no pass).
@@ -1894,6 +1967,46 @@ mod tests {
     /// answered again from where the one before ended: to its end, the one pass to the bit, or
     /// up to the checkpoint where it rejoins its own answers, the one pass to the tolerance.
     /// The answer does not depend on the number of threads.
+    #[test]
+    fn a_pass_is_cut_by_configurations_the_largest_pieces_first() {
+        assert_eq!(piece_weights(6), vec![3, 3, 2, 2, 1, 1]);
+        assert_eq!(piece_weights(4), vec![2, 2, 1, 1]);
+        assert_eq!(piece_weights(2), vec![1, 1]);
+        assert_eq!(piece_weights(3), vec![1, 1, 1]);
+        // 1200 rows: the first 600 at rest (one configuration each), the last 600 moving (a
+        // stair of three before each row): 3000 configurations in all.
+        let pose = Pose {
+            x: 0.0,
+            y: 0.0,
+            phi: 0.0,
+        };
+        let step = (pose, [0.0; 3]);
+        let rigid = RigidPath {
+            poses: vec![Some(pose); 1200],
+            stairs: (0..1200)
+                .map(|k| if k < 600 { Vec::new() } else { vec![step; 3] })
+                .collect(),
+        };
+        let starts = rigid.piece_starts(1200, 6);
+        assert_eq!(starts.len(), 6);
+        assert_eq!(starts[0], 0);
+        let cost =
+            |a: usize, b: usize| -> usize { (a..b).map(|k| 1 + rigid.stairs[k].len()).sum() };
+        let ends: Vec<usize> = starts[1..].iter().copied().chain([1200]).collect();
+        let costs: Vec<usize> = starts
+            .iter()
+            .zip(&ends)
+            .map(|(&a, &b)| cost(a, b))
+            .collect();
+        // 3000 * 3/12 = 750 for the two largest, 500 and 250 for the others, to a row's cost.
+        for (c, want) in costs.iter().zip([750, 750, 500, 500, 250, 250]) {
+            assert!(c.abs_diff(want) <= 4, "{costs:?}");
+        }
+        // The first piece holds every row at rest and a few moving ones (pieces of equal rows
+        // would have ended it at row 200).
+        assert!((630..=645).contains(&ends[0]), "{starts:?}");
+    }
+
     #[test]
     fn a_friction_pass_in_pieces_is_the_pass_in_one() {
         let (_, m, f, kappa, rigid) = rubbing_path(1500);
