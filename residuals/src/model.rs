@@ -348,6 +348,7 @@ fn along_path_in<S: PassState, T: Send>(
         }
         take();
     });
+    // A piece's panic propagates from the scope: every slot is filled here.
     let answered: Vec<Piece<S, T>> = slots
         .into_iter()
         .filter_map(|m| m.into_inner().ok().flatten())
@@ -1957,16 +1958,6 @@ mod tests {
         assert_eq!(a, b);
     }
 
-    /// A series of `n` rows 20 ms apart whose motors swing about home by `amplitude` steps
-    /// (motor i at `rate` t + `phase` i rad), rounded to whole steps, each row with a measured
-    /// pose.
-    /// A friction pass in pieces is the pass in one from the first row: with its history
-    /// rebuilt over the configurations before each piece, every piece agrees with the end of the
-    /// one before and the deflections and their derivatives are the one pass's to well within
-    /// the equilibrium's tolerance; with no history rebuilt, no piece agrees and each is
-    /// answered again from where the one before ended: to its end, the one pass to the bit, or
-    /// up to the checkpoint where it rejoins its own answers, the one pass to the tolerance.
-    /// The answer does not depend on the number of threads.
     #[test]
     fn a_pass_is_cut_by_configurations_the_largest_pieces_first() {
         assert_eq!(piece_weights(6), vec![3, 3, 2, 2, 1, 1]);
@@ -2007,6 +1998,13 @@ mod tests {
         assert!((630..=645).contains(&ends[0]), "{starts:?}");
     }
 
+    /// A friction pass in pieces is the pass in one from the first row: with its history
+    /// rebuilt over the configurations before each piece, every piece agrees with the end of the
+    /// one before and the deflections and their derivatives are the one pass's to well within
+    /// the equilibrium's tolerance; with no history rebuilt, no piece agrees and each is
+    /// answered again from where the one before ended: to its end, the one pass to the bit, or
+    /// up to the checkpoint where it rejoins its own answers, the one pass to the tolerance.
+    /// The answer does not depend on the number of threads.
     #[test]
     fn a_friction_pass_in_pieces_is_the_pass_in_one() {
         let (_, m, f, kappa, rigid) = rubbing_path(1500);
@@ -2167,6 +2165,9 @@ mod tests {
         assert_eq!(chunked.poses, one);
     }
 
+    /// A series of `n` rows 20 ms apart whose motors swing about home by `amplitude` steps
+    /// (motor i at `rate` t + `phase` i rad), rounded to whole steps, each row with a measured
+    /// pose.
     fn swinging(cfg: &RobotConfig, n: usize, amplitude: f64, rate: f64, phase: f64) -> Series {
         let home = Robot::new(cfg).unwrap().home_motor_steps();
         let mut rec = pcr_recording::Recording::default();
