@@ -304,20 +304,14 @@ def main(argv: list[str]) -> int:
                       f"  exit {r['rc']}", flush=True)
             if stopped:
                 break
-    except Interrupted as e:
+    except (Interrupted, KeyboardInterrupt) as e:
         signal.setitimer(signal.ITIMER_REAL, 0)
         runner.reap()
         print("\n".join(summary(counted) + exit_codes(every)), flush=True)
-        print(f"inturn.py: stopped by {e}; the figures above are of the runs that finished",
+        by = e if isinstance(e, Interrupted) else "SIGINT"
+        print(f"inturn.py: stopped by {by}; the figures above are of the runs that finished",
               file=sys.stderr)
-        return 128 + e.signum
-    except KeyboardInterrupt:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        runner.reap()
-        print("\n".join(summary(counted) + exit_codes(every)), flush=True)
-        print("inturn.py: interrupted; the figures above are of the runs that finished",
-              file=sys.stderr)
-        return 130
+        return 128 + (e.signum if isinstance(e, Interrupted) else signal.SIGINT)
     signal.setitimer(signal.ITIMER_REAL, 0)
     print("\n".join(summary(counted) + exit_codes(every)), flush=True)
     if stopped:
