@@ -226,18 +226,34 @@ struct JointProblem<'a> {
     w: f64,
 }
 
-impl JointProblem<'_> {
-    fn m_count(&self) -> usize {
-        self.obs.legs.iter().map(|o| 2 * o.len()).sum()
-    }
-}
-
 impl Problem for JointProblem<'_> {
     fn residual_count(&self) -> usize {
         self.m_count() + 3 * self.obs.poses.len()
     }
 
     fn residuals(&mut self, x: &[f64], r: &mut [f64]) -> Result<(), String> {
+        self.evaluate(x, r)
+    }
+
+    /// The columns in parallel ([`lsq::forward_difference_parallel`]).
+    fn jacobian(
+        &mut self,
+        x: &[f64],
+        r: &[f64],
+        upper: &[f64],
+        j: &mut nalgebra::DMatrix<f64>,
+    ) -> Result<(), String> {
+        lsq::forward_difference_parallel(&|x, r| self.evaluate(x, r), x, r, upper, j)
+    }
+}
+
+impl JointProblem<'_> {
+    fn m_count(&self) -> usize {
+        self.obs.legs.iter().map(|o| 2 * o.len()).sum()
+    }
+
+    /// The residuals at `x` ([`Problem::residuals`]).
+    fn evaluate(&self, x: &[f64], r: &mut [f64]) -> Result<(), String> {
         let cfg = self.layout.robot(self.base, x);
         // The observations through the frame correction, when it is freed.
         let framed = self.layout.frame(x).map(|f| framed(&f, self.obs));

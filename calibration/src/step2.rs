@@ -181,6 +181,24 @@ impl Problem for PlatformProblem<'_> {
     }
 
     fn residuals(&mut self, x: &[f64], r: &mut [f64]) -> Result<(), String> {
+        self.evaluate(x, r)
+    }
+
+    /// The columns in parallel ([`lsq::forward_difference_parallel`]).
+    fn jacobian(
+        &mut self,
+        x: &[f64],
+        r: &[f64],
+        upper: &[f64],
+        j: &mut nalgebra::DMatrix<f64>,
+    ) -> Result<(), String> {
+        lsq::forward_difference_parallel(&|x, r| self.evaluate(x, r), x, r, upper, j)
+    }
+}
+
+impl PlatformProblem<'_> {
+    /// The residuals at `x` ([`Problem::residuals`]).
+    fn evaluate(&self, x: &[f64], r: &mut [f64]) -> Result<(), String> {
         let robot = Robot::new(&robot_of(self.base, self.free, x)).map_err(|e| e.to_string())?;
         pose_residuals(&robot, self.obs, self.w, r)
     }

@@ -534,6 +534,13 @@ impl<'a> Search<'a> {
                 .collect::<Vec<_>>()
         };
         let (later, first): (Vec<_>, Vec<_>) = names.iter().enumerate().partition(|(_, n)| last(n));
+        // What the candidates read of the context that they share, computed before they run in
+        // parallel ([`effects::Effect::share`]).
+        for name in &names {
+            if let Some(e) = effects::named(name) {
+                e.share(ctx);
+            }
+        }
         let mut fitted_all: Vec<Option<Fitted>> = vec![None; names.len()];
         for (i, f) in fit_each(first, None) {
             fitted_all[i] = f;

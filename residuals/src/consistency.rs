@@ -110,7 +110,9 @@ pub fn inconsistency(
         p => vec![p],
     };
     // The checks, and the two parts of each, are fitted independently: one per thread, the
-    // first disagreement in the checks' order reported.
+    // first disagreement in the checks' order reported; what every fit reads of the context is
+    // computed first.
+    effect.share(ctx);
     checks.into_par_iter().find_map_first(|p| {
         let (parts, names) = split(p, ctx, train)?;
         let (fa, fb) = rayon::join(

@@ -860,6 +860,38 @@ pub(crate) mod tests {
             .all(|(&i, &j)| thin.rows[i].k == full.rows[j].k));
     }
 
+    /// What the fits of a compliance read of a context that every fit on it shares, the
+    /// nuisance columns and the load responses, is computed by [`crate::effects::Effect::share`]
+    /// before the fits (which run in parallel on it), and a fit then reads those: the same fit
+    /// as on a context that computes them itself.
+    #[test]
+    fn a_compliance_shares_its_nuisance_and_load_responses_before_its_fits() {
+        let mut cfg = RobotConfig::nominal();
+        cfg.effects.compliance = Some(pcr_robot::effects::Compliance {
+            ei_n_mm2: 6.5e4,
+            force_n: [0.4, -0.3],
+            couple_n_mm: 0.0,
+            k_m_n_mm_per_rad: 0.0,
+            k_p_n_mm_per_rad: 0.0,
+        });
+        let series = moving_series();
+        let blocks = Blocks::in_time(&series, 1.0, 3);
+        let model = ExtendedModel::new(&cfg, crate::effects::chain()).unwrap();
+        let shared = Context::new(&series, model.clone(), &blocks, 50.0);
+        let alone = Context::new(&series, model, &blocks, 50.0);
+        assert!(shared.nuisance.get().is_none() && shared.load_response_check().is_none());
+        let load = crate::effects::named("external_load").unwrap();
+        load.share(&shared);
+        assert!(shared.nuisance.get().is_some() && shared.load_response_check().is_some());
+        let train = shared.train();
+        let a = load.fit(&shared, &train).unwrap();
+        let b = load.fit(&alone, &train).unwrap();
+        assert_eq!(a.train_sse, b.train_sse);
+        for (p, q) in a.params.iter().zip(&b.params) {
+            assert_eq!((&p.name, p.value, p.std), (&q.name, q.value, q.std));
+        }
+    }
+
     /// A context that must hold at least so many rows stops predicting once it cannot
     /// ([`Context::at_least`]), and holds every row it can where it can.
     #[test]

@@ -107,8 +107,12 @@ fn with_frame(
         frame: true,
         ..opts.clone()
     };
-    let free = calibrate_data(drawing, framed, &free).ok()?;
-    let none = calibrate_data(drawing, data, opts).ok()?;
+    // The two calibrations are independent: one per thread.
+    let (free, none) = rayon::join(
+        || calibrate_data(drawing, framed, &free),
+        || calibrate_data(drawing, data, opts),
+    );
+    let (free, none) = (free.ok()?, none.ok()?);
     frame_confirmed(&free, &none, drawing).then_some(free)
 }
 

@@ -112,13 +112,27 @@ pub(crate) fn fit(
     Some(f)
 }
 
+/// What a fit of a compliance reads of a context that every fit on it shares
+/// ([`crate::effects::Effect::share`]): the nuisance columns and the load responses at the
+/// loads of its model.
+pub(crate) fn share(ctx: &Context) {
+    let _ = ctx.nuisance();
+    let _ = model_load_responses(ctx);
+}
+
+/// The load responses of every row of `ctx` at the loads of its model (none: a compliance of
+/// zero).
+fn model_load_responses(ctx: &Context) -> std::sync::Arc<Vec<[[f64; 3]; 5]>> {
+    let base = held(&ctx.model.config.effects);
+    ctx.load_responses(&Loads::from_compliance(&base))
+}
+
 /// One linearised kineto-static fit at the loads of `ctx`'s model ([`fit`]).
 fn fit_at(ctx: &Context, train: &[usize], name: &'static str, which: &[usize]) -> Option<Fitted> {
     let base = held(&ctx.model.config.effects);
-    let loads = Loads::from_compliance(&base);
     // Per-row responses (per N, per 100 N mm, per 100 N mm/rad for conditioning).
     let scale = [1.0, 1.0, 100.0, 100.0, 100.0];
-    let resp = ctx.load_responses(&loads);
+    let resp = model_load_responses(ctx);
     let n_e = which.len();
     let effect = |i: usize, c: &mut Columns| {
         for (a, &j) in which.iter().enumerate() {

@@ -39,6 +39,10 @@ impl Effect for ExternalLoad {
         compliance::fit(ctx, train, self.name(), &[0, 1, 2])
     }
 
+    fn share(&self, ctx: &Context) {
+        compliance::share(ctx);
+    }
+
     fn declared(&self, effects: &Effects, _fitted: &[Estimate]) -> Option<Vec<Estimate>> {
         effects.compliance.as_ref().map(|k| {
             vec![

@@ -612,6 +612,12 @@ impl Effect for Friction {
         fit_from(ctx, train, None, 0, true, None)
     }
 
+    /// The nuisance columns and the rigid paths its passes run along.
+    fn share(&self, ctx: &Context) {
+        let _ = ctx.nuisance();
+        let _ = ctx.paths();
+    }
+
     /// One step from the whole fit's values, the joints' pre-sliding travel held there: a shape
     /// of the elements' law that a part of the data tells poorly (at the prototype's friction
     /// 0.2 +- 0.2 mrad in one half of the recording, 2.0 +- 0.5 in the other), not a strength

@@ -41,6 +41,10 @@ impl Effect for JointSprings {
         compliance::fit(ctx, train, self.name(), &[3, 4])
     }
 
+    fn share(&self, ctx: &Context) {
+        compliance::share(ctx);
+    }
+
     fn declared(&self, effects: &Effects, _fitted: &[Estimate]) -> Option<Vec<Estimate>> {
         effects.compliance.as_ref().map(|k| {
             vec![

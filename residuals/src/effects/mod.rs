@@ -168,6 +168,16 @@ pub trait Effect: Extension {
         self.fit(ctx, train)
     }
 
+    /// Computes what its fits read of `ctx` that every fit on `ctx` shares, each computed once
+    /// per context (the nuisance columns by default): called before several fits on one
+    /// context run in parallel (a round's candidates, the two parts of a consistency check).
+    /// A fit that finds it missing computes it itself and the other fits wait for it, each on
+    /// a core that then takes no other work: on two cores a third of a loaded model's nuisance
+    /// columns was solved with the other core idle.
+    fn share(&self, ctx: &Context) {
+        let _ = ctx.nuisance();
+    }
+
     /// Fits it on `train` as the whole fit `whole` was made: its searched values (a motor, a
     /// period) kept, its continuous parameters fitted again. The consistency check compares
     /// parts of the data with it ([`crate::consistency`]). [`Effect::fit`] by default.
