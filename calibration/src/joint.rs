@@ -226,34 +226,18 @@ struct JointProblem<'a> {
     w: f64,
 }
 
-impl Problem for JointProblem<'_> {
-    fn residual_count(&self) -> usize {
-        self.m_count() + 3 * self.obs.poses.len()
-    }
-
-    fn residuals(&mut self, x: &[f64], r: &mut [f64]) -> Result<(), String> {
-        self.evaluate(x, r)
-    }
-
-    /// The columns in parallel ([`lsq::forward_difference_parallel`]).
-    fn jacobian(
-        &mut self,
-        x: &[f64],
-        r: &[f64],
-        upper: &[f64],
-        j: &mut nalgebra::DMatrix<f64>,
-    ) -> Result<(), String> {
-        lsq::forward_difference_parallel(&|x, r| self.evaluate(x, r), x, r, upper, j)
-    }
-}
-
 impl JointProblem<'_> {
     fn m_count(&self) -> usize {
         self.obs.legs.iter().map(|o| 2 * o.len()).sum()
     }
+}
 
-    /// The residuals at `x` ([`Problem::residuals`]).
-    fn evaluate(&self, x: &[f64], r: &mut [f64]) -> Result<(), String> {
+impl lsq::SharedProblem for JointProblem<'_> {
+    fn residual_count(&self) -> usize {
+        self.m_count() + 3 * self.obs.poses.len()
+    }
+
+    fn residuals_at(&self, x: &[f64], r: &mut [f64]) -> Result<(), String> {
         let cfg = self.layout.robot(self.base, x);
         // The observations through the frame correction, when it is freed.
         let framed = self.layout.frame(x).map(|f| framed(&f, self.obs));
@@ -329,12 +313,12 @@ pub fn refine(
     }
     let layout = Layout::new(free, start);
     let b = layout.param_box(two_step, start);
-    let mut prob = JointProblem {
+    let mut prob = lsq::InParallel(JointProblem {
         layout,
         base: two_step,
         obs,
         w: phi_weight_mm_per_deg,
-    };
+    });
     let m = prob.residual_count();
     if m <= b.len() + 2 {
         return Err(JointError::TooFew {
@@ -353,7 +337,7 @@ pub fn refine(
         params,
         correlated,
         phi_weight_mm_per_deg,
-        m_residuals: prob.m_count(),
+        m_residuals: prob.0.m_count(),
         pose_residuals: 3 * obs.poses.len(),
         start_rms_mm: rms(&r0),
         rms_mm: fit.rms(),

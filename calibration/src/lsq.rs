@@ -222,6 +222,41 @@ pub fn forward_difference_parallel(
     Ok(())
 }
 
+/// A least-squares problem whose residuals a shared reference evaluates (it keeps no state
+/// between evaluations): solved as [`InParallel`], its Jacobian's columns are evaluated in
+/// parallel.
+pub trait SharedProblem: Sync {
+    /// Number of residuals m.
+    fn residual_count(&self) -> usize;
+
+    /// Writes the residuals at `x` into `r` ([`Problem::residuals`]).
+    fn residuals_at(&self, x: &[f64], r: &mut [f64]) -> Result<(), String>;
+}
+
+/// A [`SharedProblem`] as a [`Problem`] whose forward-difference Jacobian's columns are
+/// evaluated in parallel ([`forward_difference_parallel`]): the same fit, to the bit.
+pub struct InParallel<P>(pub P);
+
+impl<P: SharedProblem> Problem for InParallel<P> {
+    fn residual_count(&self) -> usize {
+        self.0.residual_count()
+    }
+
+    fn residuals(&mut self, x: &[f64], r: &mut [f64]) -> Result<(), String> {
+        self.0.residuals_at(x, r)
+    }
+
+    fn jacobian(
+        &mut self,
+        x: &[f64],
+        r: &[f64],
+        upper: &[f64],
+        j: &mut DMatrix<f64>,
+    ) -> Result<(), String> {
+        forward_difference_parallel(&|x, r| self.0.residuals_at(x, r), x, r, upper, j)
+    }
+}
+
 /// The forward-difference step of parameter `k` at `x` ([`forward_difference`]).
 fn difference_step(x: &[f64], upper: &[f64], k: usize) -> f64 {
     let h = f64::EPSILON.sqrt() * x[k].abs().max(1.0);

@@ -8,7 +8,7 @@
 //! degree (w = r_p pi / 180, about 1.03 mm/deg for r_p = 59 mm). `--phi-weight` changes it.
 //! [`Step2Params::extended`] frees the link lengths l_st as well.
 
-use crate::lsq::{self, Options, Problem};
+use crate::lsq::{self, Options};
 use crate::params::ParamBox;
 use crate::step1::{describe, Correlated, Param};
 use pcr_kinematics::{Pose, Robot};
@@ -175,30 +175,12 @@ pub(crate) fn robot_of(base: &RobotConfig, free: Step2Params, x: &[f64]) -> Robo
     c
 }
 
-impl Problem for PlatformProblem<'_> {
+impl lsq::SharedProblem for PlatformProblem<'_> {
     fn residual_count(&self) -> usize {
         3 * self.obs.len()
     }
 
-    fn residuals(&mut self, x: &[f64], r: &mut [f64]) -> Result<(), String> {
-        self.evaluate(x, r)
-    }
-
-    /// The columns in parallel ([`lsq::forward_difference_parallel`]).
-    fn jacobian(
-        &mut self,
-        x: &[f64],
-        r: &[f64],
-        upper: &[f64],
-        j: &mut nalgebra::DMatrix<f64>,
-    ) -> Result<(), String> {
-        lsq::forward_difference_parallel(&|x, r| self.evaluate(x, r), x, r, upper, j)
-    }
-}
-
-impl PlatformProblem<'_> {
-    /// The residuals at `x` ([`Problem::residuals`]).
-    fn evaluate(&self, x: &[f64], r: &mut [f64]) -> Result<(), String> {
+    fn residuals_at(&self, x: &[f64], r: &mut [f64]) -> Result<(), String> {
         let robot = Robot::new(&robot_of(self.base, self.free, x)).map_err(|e| e.to_string())?;
         pose_residuals(&robot, self.obs, self.w, r)
     }
@@ -267,12 +249,12 @@ pub fn fit_platform(
         });
     }
     let b = platform_box(base, free);
-    let mut prob = PlatformProblem {
+    let mut prob = lsq::InParallel(PlatformProblem {
         base,
         free,
         obs: train,
         w: phi_weight_mm_per_deg,
-    };
+    });
     let fit = lsq::solve(&mut prob, &b.start, &b.lower, &b.upper, &Options::default())
         .map_err(|e| Step2Error::Solver(e.to_string()))?;
     let config = robot_of(base, free, &fit.x);
