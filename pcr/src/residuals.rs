@@ -62,6 +62,11 @@ pub(crate) fn extended_file(res: &pcr_residuals::Attribution, created: &str) -> 
 
 /// Runs `pcr residuals`.
 pub fn run(a: Args) -> anyhow::Result<()> {
+    // The calibration and the reading too on a thread of rayon's pool.
+    pcr_residuals::on_the_pool(move || analyse(a))
+}
+
+fn analyse(a: Args) -> anyhow::Result<()> {
     if !(a.block_s > 0.0 && a.block_s.is_finite()) {
         bail!(
             "--block-s {}: must be a positive number of seconds",

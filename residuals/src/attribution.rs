@@ -199,6 +199,18 @@ pub fn attribute(
     blocks: &Blocks,
     opts: &Options,
 ) -> Result<Attribution, AttributionError> {
+    // On a thread of rayon's pool ([`crate::on_the_pool`]).
+    crate::on_the_pool(|| attribute_here(start, drawing, series, blocks, opts))
+}
+
+/// [`attribute`], on the thread it is called on.
+fn attribute_here(
+    start: &RobotConfig,
+    drawing: &RobotConfig,
+    series: &[Series],
+    blocks: &Blocks,
+    opts: &Options,
+) -> Result<Attribution, AttributionError> {
     let w_phi = start.legs.iter().map(|l| l.r_p_mm).sum::<f64>() / 3.0;
     let mut model = ExtendedModel::new(start, effects::chain())?;
     model.exact = opts.exact;
