@@ -40,8 +40,9 @@ pub use series::{Blocks, Series};
 /// where it is one already). Every parallel section an analysis opens from a thread outside
 /// the pool hands its work to the pool and sleeps until it is done, and the pool's threads
 /// wake and sleep for it: thousands of times an analysis (each evaluation of a refinement,
-/// each Jacobian of a calibration), 4-9 % of the wall on two cores and 1-3 % on one. From a
-/// thread of the pool, a parallel section starts where the thread is.
+/// each Jacobian of a calibration). From a thread of the pool, a parallel section starts where
+/// the thread is (`BENCHMARKS.md`, "An analysis on a thread of the pool": 0.92-1.00 of the
+/// wall on two cores, 0.93-0.99 on one).
 pub fn on_the_pool<R: Send>(work: impl FnOnce() -> R + Send) -> R {
     rayon::scope(|_| work())
 }
